@@ -10,4 +10,4 @@ class SceneError(VisradError, ValueError):
 
 
 class CancelledError(VisradError):
-    """A long stage was cancelled through its cancel() callback; the object keeps its last consistent state."""
+    """A long stage was cancelled by its cancel() callback; the object keeps its last consistent state."""
