@@ -1,0 +1,666 @@
+"""Exact views of a polygon from a point, hence exact occluded point-to-polygon form factors.
+
+Durand et al. 1999, section 4.2.1 (the form factor is Lambert's sum over the boundary of the *visible* part of
+the source, whose corners are the extremal stabbing lines through the point) and Durand et al. 1997, section 2
+(EV swaths through the point bound the view; VV and VEE lines through the point are its corners).
+
+The view is computed by central projection: every candidate blocker is clipped to the pyramid (point, source)
+-- so coordinates stay bounded, DESIGN.md section 4 -- and projected from the point onto the source's plane;
+the projections are subtracted from the source (clipped to the receiver's hemisphere) as convex polygons.
+The visible region is a set of disjoint convex pieces; every piece edge carries its generator: an edge of the
+source, an edge of a blocker (an EV swath through the point), the intersection of a blocker's face with the
+source's plane, or the receiver's horizon. Lambert's sum over the pieces is the exact form factor: the edges
+shared by two pieces cancel. Candidate blockers come from shaft culling over the scene's BVH.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numba.typed import List
+
+from .errors import SceneError
+from .formfactor import lambert_sum
+from .scene import Scene
+
+#: generator polygon of edges created by the receiver's tangent plane (the horizon of the hemisphere)
+HORIZON = -1
+#: generator edge of edges where a blocker's face crosses the source's plane (interpenetration)
+FACE_CROSSING = -1
+
+
+@dataclass(frozen=True)
+class View:
+    """The visible part of `source` seen from `point` (normal `normal`).
+
+    pieces: list of (K, 3) float64 disjoint convex polygons on the source, counter-clockwise around the
+        source's normal as seen from the point's side; their union is the visible region.
+    segments: (M, 2, 3) float64 boundary segments of the visible region (shared piece edges cancelled).
+    generators: (M, 2) int64 per segment: (polygon, local edge) that generates it. polygon == source: an edge
+        of the source; another polygon: an edge of a blocker (an EV swath through the point), or, with local
+        edge FACE_CROSSING, the line where that blocker's face crosses the source's plane; polygon HORIZON:
+        the receiver's tangent plane.
+    form_factor: the exact occluded form factor (projected solid angle of the visible region over pi).
+    """
+
+    point: np.ndarray
+    normal: np.ndarray
+    source: int
+    pieces: list
+    segments: np.ndarray
+    generators: np.ndarray
+    form_factor: float
+
+
+def exact_form_factors(scene: Scene, points, normals, source: int, blockers=None, bvh=None) -> np.ndarray:
+    """Exact occluded form factors from differential areas to polygon `source`.
+
+    points: (N, 3) float64; normals: (N, 3) receiver normals (normalised here); source: polygon index;
+    blockers: None for every polygon of the scene, or a sequence of polygon ids that may occlude.
+    bvh: optional prebuilt core.bvh.BVH of the scene (built and cached on first use otherwise).
+    Returns (N,) float64 in [0, 1]. Polygons whose plane holds the point (the receiver itself, its coplanar
+    neighbours) can only be seen edge-on and never occlude it.
+    """
+    pts, nrm = _check_points(points, normals)
+    _check_source(scene, source)
+    allowed = _allowed_mask(scene, blockers)
+    return _form_factors(pts, nrm, source, allowed, *_scene_arrays(scene), scene.tol.length)
+
+
+def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None) -> View:
+    """The exact view of polygon `source` from one point: visible pieces, labelled boundary, form factor.
+
+    point, normal: (3,) float64. See exact_form_factors for the other arguments.
+    """
+    pts, nrm = _check_points(np.reshape(point, (1, 3)), np.reshape(normal, (1, 3)))
+    _check_source(scene, source)
+    allowed = _allowed_mask(scene, blockers)
+    pieces_xy, pieces_gen, frame = _point_view(
+        pts[0], nrm[0], source, allowed, *_scene_arrays(scene), scene.tol.length
+    )
+    origin, u, v, scale = frame[0], frame[1], frame[2], frame[3][0]
+    pieces = [origin + scale * (xy[:, :1] * u + xy[:, 1:2] * v) for xy in pieces_xy]
+    total = 0.0
+    for piece in pieces:
+        total += lambert_sum(pts[0], nrm[0], piece, len(piece))
+    segments, generators = _boundary(list(pieces_xy), list(pieces_gen), scene.tol.length / scale)
+    segments3 = origin + scale * (segments[..., :1] * u + segments[..., 1:2] * v)
+    return View(
+        point=pts[0],
+        normal=nrm[0],
+        source=int(source),
+        pieces=pieces,
+        segments=segments3.reshape(-1, 2, 3),
+        generators=generators,
+        form_factor=abs(total) / (2.0 * np.pi),
+    )
+
+
+def _check_points(points, normals):
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    nrm = np.array(normals, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise SceneError(f"points must have shape (N, 3), got {pts.shape}")
+    if nrm.shape != pts.shape:
+        raise SceneError(f"normals must have the shape of points {pts.shape}, got {nrm.shape}")
+    if not (np.isfinite(pts).all() and np.isfinite(nrm).all()):
+        raise SceneError("points and normals must be finite")
+    lengths = np.linalg.norm(nrm, axis=1)
+    if np.any(lengths == 0.0):
+        raise SceneError(f"normal {int(np.flatnonzero(lengths == 0.0)[0])} is zero")
+    return pts, nrm / lengths[:, None]
+
+
+def _check_source(scene: Scene, source: int) -> None:
+    if not (0 <= int(source) < scene.n_polygons):
+        raise SceneError(f"source polygon {source} is outside 0..{scene.n_polygons - 1}")
+
+
+def _allowed_mask(scene: Scene, blockers) -> np.ndarray:
+    if blockers is None:
+        return np.ones(scene.n_polygons, dtype=np.bool_)
+    ids = np.asarray(blockers, dtype=np.int64).reshape(-1)
+    if ids.size and (ids.min() < 0 or ids.max() >= scene.n_polygons):
+        bad = int(ids[(ids < 0) | (ids >= scene.n_polygons)][0])
+        raise SceneError(f"blocker {bad} is not a polygon of the scene (0..{scene.n_polygons - 1})")
+    allowed = np.zeros(scene.n_polygons, dtype=np.bool_)
+    allowed[ids] = True
+    return allowed
+
+
+def _scene_arrays(scene: Scene):
+    return (
+        scene.polygon_offsets,
+        scene.polygon_points,
+        scene.normals,
+        scene.plane_offsets,
+        scene.polygon_min,
+        scene.polygon_max,
+    )
+
+
+@njit(cache=True)
+def _form_factors(points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets,
+                  poly_min, poly_max, eps):
+    count = len(points)
+    result = np.empty(count)
+    for i in range(count):
+        pieces_xy, _, frame = _point_view(
+            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets,
+            poly_min, poly_max, eps,
+        )
+        result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
+    return result
+
+
+@njit(cache=True)
+def _pieces_form_factor(point, normal, pieces_xy, frame):
+    origin = frame[0]
+    u = frame[1]
+    v = frame[2]
+    scale = frame[3, 0]
+    total = 0.0
+    for xy in pieces_xy:
+        lifted = np.empty((len(xy), 3))
+        for j in range(len(xy)):
+            for c in range(3):
+                lifted[j, c] = origin[c] + scale * (xy[j, 0] * u[c] + xy[j, 1] * v[c])
+        total += lambert_sum(point, normal, lifted, len(lifted))
+    return min(abs(total) / (2.0 * np.pi), 1.0)
+
+
+@njit(cache=True)
+def _source_frame(polygon):
+    """Origin (area-independent centroid of the corners), in-plane axes u, v and the polygon's radius."""
+    origin = np.zeros(3)
+    for j in range(len(polygon)):
+        origin += polygon[j]
+    origin /= len(polygon)
+    normal = np.zeros(3)
+    k = len(polygon)
+    for j in range(k):
+        a = polygon[j]
+        b = polygon[(j + 1) % k]
+        normal[0] += a[1] * b[2] - a[2] * b[1]
+        normal[1] += a[2] * b[0] - a[0] * b[2]
+        normal[2] += a[0] * b[1] - a[1] * b[0]
+    normal /= np.sqrt((normal * normal).sum())
+    helper = np.zeros(3)
+    helper[np.argmin(np.abs(normal))] = 1.0
+    u = np.cross(helper, normal)
+    u /= np.sqrt((u * u).sum())
+    v = np.cross(normal, u)
+    radius = 0.0
+    for j in range(k):
+        d = polygon[j] - origin
+        radius = max(radius, np.sqrt((d * d).sum()))
+    frame = np.zeros((4, 3))
+    frame[0] = origin
+    frame[1] = u
+    frame[2] = v
+    frame[3, 0] = radius
+    return frame
+
+
+@njit(cache=True)
+def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
+    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0.
+
+    labels (K, 2) int64: generator of the edge starting at each corner. The new edge along the plane gets
+    (cut_polygon, cut_edge). Returns the clipped corners and labels (possibly fewer than 3 corners).
+    """
+    k = len(polygon)
+    out = np.empty((k + 1, 3))
+    out_labels = np.empty((k + 1, 2), dtype=np.int64)
+    side = np.empty(k)
+    for i in range(k):
+        side[i] = (
+            plane_normal[0] * polygon[i, 0]
+            + plane_normal[1] * polygon[i, 1]
+            + plane_normal[2] * polygon[i, 2]
+            + plane_offset
+        )
+    count = 0
+    for i in range(k):
+        j = (i + 1) % k
+        si = side[i]
+        sj = side[j]
+        if si >= 0.0:
+            out[count] = polygon[i]
+            if si == 0.0 and sj < 0.0:
+                out_labels[count, 0] = cut_polygon
+                out_labels[count, 1] = cut_edge
+            else:
+                out_labels[count] = labels[i]
+            count += 1
+        if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
+            t = si / (si - sj)
+            out[count] = polygon[i] + t * (polygon[j] - polygon[i])
+            if si > 0.0:
+                out_labels[count, 0] = cut_polygon
+                out_labels[count, 1] = cut_edge
+            else:
+                out_labels[count] = labels[i]
+            count += 1
+    return out[:count].copy(), out_labels[:count].copy()
+
+
+@njit(cache=True)
+def _split(xy, labels, ax, ay, bx, by, cut_polygon, cut_edge, eps):
+    """Split a convex counter-clockwise 2-D polygon by the directed line a->b.
+
+    Returns (inside_xy, inside_labels, outside_xy, outside_labels): inside is left of a->b. Corners within
+    eps of the line count as on it; parts of zero width are returned empty.
+    """
+    k = len(xy)
+    dx = bx - ax
+    dy = by - ay
+    length = np.sqrt(dx * dx + dy * dy)
+    side = np.empty(k)
+    for i in range(k):
+        s = (dx * (xy[i, 1] - ay) - dy * (xy[i, 0] - ax)) / length
+        side[i] = 0.0 if abs(s) <= eps else s
+    inside = np.empty((k + 2, 2))
+    inside_labels = np.empty((k + 2, 2), dtype=np.int64)
+    outside = np.empty((k + 2, 2))
+    outside_labels = np.empty((k + 2, 2), dtype=np.int64)
+    n_in = 0
+    n_out = 0
+    for i in range(k):
+        j = (i + 1) % k
+        si = side[i]
+        sj = side[j]
+        if si >= 0.0:
+            inside[n_in] = xy[i]
+            if si == 0.0 and sj < 0.0:
+                inside_labels[n_in, 0] = cut_polygon
+                inside_labels[n_in, 1] = cut_edge
+            else:
+                inside_labels[n_in] = labels[i]
+            n_in += 1
+        if si <= 0.0:
+            outside[n_out] = xy[i]
+            if si == 0.0 and sj > 0.0:
+                outside_labels[n_out, 0] = cut_polygon
+                outside_labels[n_out, 1] = cut_edge
+            else:
+                outside_labels[n_out] = labels[i]
+            n_out += 1
+        if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
+            t = si / (si - sj)
+            cx = xy[i, 0] + t * (xy[j, 0] - xy[i, 0])
+            cy = xy[i, 1] + t * (xy[j, 1] - xy[i, 1])
+            inside[n_in, 0] = cx
+            inside[n_in, 1] = cy
+            outside[n_out, 0] = cx
+            outside[n_out, 1] = cy
+            if si > 0.0:
+                inside_labels[n_in, 0] = cut_polygon
+                inside_labels[n_in, 1] = cut_edge
+                outside_labels[n_out] = labels[i]
+            else:
+                inside_labels[n_in] = labels[i]
+                outside_labels[n_out, 0] = cut_polygon
+                outside_labels[n_out, 1] = cut_edge
+            n_in += 1
+            n_out += 1
+    in_xy, in_labels = _cleanup(inside[:n_in], inside_labels[:n_in], eps)
+    out_xy, out_labels = _cleanup(outside[:n_out], outside_labels[:n_out], eps)
+    return in_xy, in_labels, out_xy, out_labels
+
+
+@njit(cache=True)
+def _cleanup(xy, labels, eps):
+    """Drop zero-length edges; return empty arrays when the polygon is thinner than eps."""
+    k = len(xy)
+    keep = np.ones(k, dtype=np.bool_)
+    for i in range(k):
+        j = (i + 1) % k
+        dx = xy[j, 0] - xy[i, 0]
+        dy = xy[j, 1] - xy[i, 1]
+        if dx * dx + dy * dy <= eps * eps:
+            # the edge i -> j is degenerate: corner i goes, corner j keeps its outgoing generator
+            keep[i] = False
+    count = 0
+    for i in range(k):
+        if keep[i]:
+            count += 1
+    if count < 3:
+        return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
+    out = np.empty((count, 2))
+    out_labels = np.empty((count, 2), dtype=np.int64)
+    n = 0
+    for i in range(k):
+        if keep[i]:
+            out[n] = xy[i]
+            out_labels[n] = labels[i]
+            n += 1
+    area2 = 0.0
+    perimeter = 0.0
+    for i in range(count):
+        j = (i + 1) % count
+        area2 += out[i, 0] * out[j, 1] - out[j, 0] * out[i, 1]
+        dx = out[j, 0] - out[i, 0]
+        dy = out[j, 1] - out[i, 1]
+        perimeter += np.sqrt(dx * dx + dy * dy)
+    # width = 2 area / perimeter: a sliver thinner than eps has no area to speak of
+    if area2 <= eps * perimeter:
+        return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
+    return out, out_labels
+
+
+@njit(cache=True)
+def _relation(piece, blocker, eps):
+    """0: disjoint (a separating edge line exists), 1: piece inside blocker, 2: they overlap."""
+    inside_all = True
+    for e in range(len(blocker)):
+        ax = blocker[e, 0]
+        ay = blocker[e, 1]
+        bx = blocker[(e + 1) % len(blocker), 0]
+        by = blocker[(e + 1) % len(blocker), 1]
+        dx = bx - ax
+        dy = by - ay
+        length = np.sqrt(dx * dx + dy * dy)
+        all_out = True
+        for i in range(len(piece)):
+            s = (dx * (piece[i, 1] - ay) - dy * (piece[i, 0] - ax)) / length
+            if s > eps:
+                all_out = False
+            if s < -eps:
+                inside_all = False
+        if all_out:
+            return 0
+    if inside_all:
+        return 1
+    for e in range(len(piece)):
+        ax = piece[e, 0]
+        ay = piece[e, 1]
+        bx = piece[(e + 1) % len(piece), 0]
+        by = piece[(e + 1) % len(piece), 1]
+        dx = bx - ax
+        dy = by - ay
+        length = np.sqrt(dx * dx + dy * dy)
+        all_out = True
+        for i in range(len(blocker)):
+            s = (dx * (blocker[i, 1] - ay) - dy * (blocker[i, 0] - ax)) / length
+            if s > eps:
+                all_out = False
+                break
+        if all_out:
+            return 0
+    return 2
+
+
+@njit(cache=True)
+def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
+    """Remove a convex counter-clockwise blocker from every piece; return the new piece lists."""
+    new_xy = List()
+    new_labels = List()
+    for index in range(len(pieces_xy)):
+        piece = pieces_xy[index]
+        piece_labels = pieces_labels[index]
+        relation = _relation(piece, blocker, eps)
+        if relation == 0:
+            new_xy.append(piece)
+            new_labels.append(piece_labels)
+            continue
+        if relation == 1:
+            continue
+        remainder = piece
+        remainder_labels = piece_labels
+        k = len(blocker)
+        for e in range(k):
+            f = (e + 1) % k
+            in_xy, in_labels, out_xy, out_labels = _split(
+                remainder,
+                remainder_labels,
+                blocker[e, 0],
+                blocker[e, 1],
+                blocker[f, 0],
+                blocker[f, 1],
+                blocker_labels[e, 0],
+                blocker_labels[e, 1],
+                eps,
+            )
+            if len(out_xy) > 0:
+                new_xy.append(out_xy)
+                new_labels.append(out_labels)
+            if len(in_xy) == 0:
+                break
+            remainder = in_xy
+            remainder_labels = in_labels
+    return new_xy, new_labels
+
+
+@njit(cache=True)
+def _point_view(
+    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, poly_min, poly_max, eps
+):
+    """Visible pieces of `source` from `point`, in the source's 2-D frame.
+
+    Returns (pieces_xy: list of (K, 2), pieces_labels: list of (K, 2) int64 generators, frame (4, 3): origin,
+    u, v, (radius, 0, 0)); 2-D coordinates are in units of the radius.
+    """
+    source_polygon = corners[offsets[source] : offsets[source + 1]]
+    frame = _source_frame(source_polygon)
+    origin = frame[0]
+    u = frame[1]
+    v = frame[2]
+    radius = frame[3, 0]
+    eps2 = eps / radius
+    n_source = poly_normals[source]
+    height = n_source[0] * point[0] + n_source[1] * point[1] + n_source[2] * point[2] + plane_offsets[source]
+    if abs(height) <= eps:
+        return _empty_pieces(frame)
+    sign = 1.0 if height > 0.0 else -1.0
+    height = abs(height)
+
+    k = len(source_polygon)
+    labels = np.empty((k, 2), dtype=np.int64)
+    for j in range(k):
+        labels[j, 0] = source
+        labels[j, 1] = j
+    plane_n = normal.copy()
+    plane_c = -(normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2])
+    visible3, side_labels = _clip3(source_polygon, labels, plane_n, plane_c, HORIZON, 0)
+    if len(visible3) < 3:
+        return _empty_pieces(frame)
+
+    xy = np.empty((len(visible3), 2))
+    for j in range(len(visible3)):
+        d = visible3[j] - origin
+        xy[j, 0] = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / radius
+        xy[j, 1] = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / radius
+    xy, visible_labels = _orient_ccw(xy, side_labels)
+    xy, visible_labels = _cleanup(xy, visible_labels, eps2)
+    if len(xy) == 0:
+        return _empty_pieces(frame)
+    pieces_xy = List()
+    pieces_labels = List()
+    pieces_xy.append(xy)
+    pieces_labels.append(visible_labels)
+
+    # the pyramid (point, visible source): inward side planes, then the source plane itself
+    m = len(visible3)
+    centre = np.zeros(3)
+    for j in range(m):
+        centre += visible3[j]
+    centre /= m
+    side_normals = np.empty((m, 3))
+    side_offsets = np.empty(m)
+    for j in range(m):
+        a = visible3[j] - point
+        b = visible3[(j + 1) % m] - point
+        w = np.cross(a, b)
+        length = np.sqrt((w * w).sum())
+        if length == 0.0:
+            w[:] = 0.0
+        else:
+            w /= length
+        if (w * (centre - point)).sum() < 0.0:
+            w = -w
+        side_normals[j] = w
+        side_offsets[j] = -(w * point).sum()
+
+    for blocker in range(len(offsets) - 1):
+        if blocker == source or not allowed[blocker]:
+            continue
+        if _box_outside(poly_min[blocker], poly_max[blocker], side_normals, side_offsets):
+            continue
+        polygon = corners[offsets[blocker] : offsets[blocker + 1]]
+        nb = poly_normals[blocker]
+        if abs(nb[0] * point[0] + nb[1] * point[1] + nb[2] * point[2] + plane_offsets[blocker]) <= eps:
+            continue
+        below = True
+        above = True
+        for j in range(len(polygon)):
+            h = sign * (
+                n_source[0] * polygon[j, 0]
+                + n_source[1] * polygon[j, 1]
+                + n_source[2] * polygon[j, 2]
+                + plane_offsets[source]
+            )
+            if h > eps:
+                below = False
+            if h < height:
+                above = False
+        if below or above:
+            continue
+        projected, projected_labels = _project_blocker(
+            polygon, blocker, point, n_source * sign, sign * plane_offsets[source], height,
+            side_normals, side_offsets, side_labels, origin, u, v, radius, eps2,
+        )
+        if len(projected) == 0:
+            continue
+        pieces_xy, pieces_labels = _subtract(pieces_xy, pieces_labels, projected, projected_labels, eps2)
+        if len(pieces_xy) == 0:
+            break
+    return pieces_xy, pieces_labels, frame
+
+
+@njit(cache=True)
+def _empty_pieces(frame):
+    pieces_xy = List()
+    pieces_labels = List()
+    pieces_xy.append(np.empty((0, 2)))
+    pieces_labels.append(np.empty((0, 2), dtype=np.int64))
+    pieces_xy.pop()
+    pieces_labels.pop()
+    return pieces_xy, pieces_labels, frame
+
+
+@njit(cache=True)
+def _box_outside(box_min, box_max, plane_normals, plane_offsets):
+    """True when the box lies entirely outside one of the half-spaces n . x + c >= 0."""
+    for j in range(len(plane_normals)):
+        n = plane_normals[j]
+        best = plane_offsets[j]
+        for c in range(3):
+            best += n[c] * (box_max[c] if n[c] > 0.0 else box_min[c])
+        if best < 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _orient_ccw(xy, labels):
+    area2 = 0.0
+    k = len(xy)
+    for i in range(k):
+        j = (i + 1) % k
+        area2 += xy[i, 0] * xy[j, 1] - xy[j, 0] * xy[i, 1]
+    if area2 >= 0.0:
+        return xy, labels
+    # reversed walk: the edge from corner j back to corner j-1 is the old edge j-1
+    out = np.empty_like(xy)
+    out_labels = np.empty_like(labels)
+    for i in range(k):
+        j = k - 1 - i
+        out[i] = xy[j]
+        out_labels[i] = labels[(j - 1) % k]
+    return out, out_labels
+
+
+@njit(cache=True)
+def _project_blocker(
+    polygon, blocker, point, source_normal, source_offset, height,
+    side_normals, side_offsets, side_labels, origin, u, v, radius, eps2,
+):
+    """Clip a blocker to the pyramid (point, visible source) and project it from the point onto the source.
+
+    source_normal/source_offset are oriented so the point is on the positive side at distance `height`.
+    Returns the projection as a counter-clockwise (K, 2) polygon in the source frame with its generators, or
+    empty arrays when nothing of the blocker is inside the pyramid.
+    """
+    k = len(polygon)
+    labels = np.empty((k, 2), dtype=np.int64)
+    for j in range(k):
+        labels[j, 0] = blocker
+        labels[j, 1] = j
+    clipped = polygon.copy()
+    for j in range(len(side_normals)):
+        clipped, labels = _clip3(clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0],
+                                 side_labels[j, 1])
+        if len(clipped) < 3:
+            return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
+    clipped, labels = _clip3(clipped, labels, source_normal, source_offset, blocker, FACE_CROSSING)
+    if len(clipped) < 3:
+        return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
+    xy = np.empty((len(clipped), 2))
+    for j in range(len(clipped)):
+        w = clipped[j] - point
+        depth = -(source_normal[0] * w[0] + source_normal[1] * w[1] + source_normal[2] * w[2])
+        if depth <= 0.0:
+            return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
+        t = height / depth
+        d = point + t * w - origin
+        xy[j, 0] = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / radius
+        xy[j, 1] = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / radius
+    xy, labels = _orient_ccw(xy, labels)
+    return _cleanup(xy, labels, eps2)
+
+
+def _boundary(pieces_xy, pieces_labels, eps):
+    """Boundary segments of the union of disjoint pieces: piece edges not shared by two pieces.
+
+    Edges on the same generator line are compared along the line; portions covered once in each direction
+    cancel. Returns segments (M, 2, 2) in the 2-D frame and generators (M, 2) int64.
+    """
+    groups: dict[tuple[int, int], list] = {}
+    for xy, labels in zip(pieces_xy, pieces_labels, strict=True):
+        for i in range(len(xy)):
+            key = (int(labels[i, 0]), int(labels[i, 1]))
+            groups.setdefault(key, []).append((xy[i], xy[(i + 1) % len(xy)]))
+    segments = []
+    generators = []
+    for key, edges in groups.items():
+        a0, b0 = edges[0]
+        direction = b0 - a0
+        direction = direction / np.linalg.norm(direction)
+        events = []
+        for a, b in edges:
+            ta = float((a - a0) @ direction)
+            tb = float((b - a0) @ direction)
+            orientation = 1 if tb > ta else -1
+            events.append((min(ta, tb), orientation))
+            events.append((max(ta, tb), -orientation))
+        events.sort()
+        cover = 0
+        start = None
+        position = 0
+        while position < len(events):
+            t = events[position][0]
+            while position < len(events) and events[position][0] <= t + eps:
+                cover += events[position][1]
+                position += 1
+            if start is not None and (cover != start[1]):
+                if t - start[0] > eps and start[1] != 0:
+                    p, q = a0 + start[0] * direction, a0 + t * direction
+                    segments.append((p, q) if start[1] > 0 else (q, p))
+                    generators.append(key)
+                start = (t, cover) if cover != 0 else None
+            elif start is None and cover != 0:
+                start = (t, cover)
+    if not segments:
+        return np.empty((0, 2, 2)), np.empty((0, 2), dtype=np.int64)
+    return np.array(segments), np.array(generators, dtype=np.int64)

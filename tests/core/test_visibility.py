@@ -1,0 +1,140 @@
+import numpy as np
+import pytest
+
+from core.errors import SceneError
+from core.formfactor import point_polygon_ff
+from core.scene import Scene
+from core.visibility import HORIZON, exact_form_factors, exact_view
+from tests.core.furnished_rooms import free_points, furnished_room
+from tests.core.naive_visibility import oracle_form_factor
+
+
+def room_scene(seed, scale=1.0):
+    vertices, polygons, boxes, size = furnished_room(seed)
+    count = len(polygons)
+    scene = Scene.from_polygons(vertices * scale, polygons, np.full((count, 3), 0.5), np.zeros((count, 3)))
+    return scene, boxes, size
+
+
+def all_form_factors(scene, points, normals):
+    return np.stack([exact_form_factors(scene, points, normals, j) for j in range(scene.n_polygons)], axis=1)
+
+
+def random_normals(rng, count):
+    normals = rng.normal(size=(count, 3))
+    return normals / np.linalg.norm(normals, axis=1)[:, None]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_closed_room_identity_free_points(seed):
+    scene, boxes, size = room_scene(seed)
+    rng = np.random.default_rng(100 + seed)
+    points = free_points(boxes, size, 50, rng)
+    normals = random_normals(rng, 50)
+    total = all_form_factors(scene, points, normals).sum(axis=1)
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(5, 8))
+def test_closed_room_identity_on_surfaces(seed):
+    """Points on the floor and on box tops (receivers lying on polygons, touching neighbours around)."""
+    scene, boxes, size = room_scene(seed)
+    rng = np.random.default_rng(200 + seed)
+    floor = np.column_stack([rng.uniform(0, size[0], 60), rng.uniform(0, size[1], 60), np.zeros(60)])
+    on_floor = [p for p in floor if all(np.any(p[:2] <= lo[:2]) or np.any(p[:2] >= hi[:2]) or lo[2] > 0
+                                        for lo, hi in boxes)][:25]
+    tops = []
+    for lo, hi in boxes:
+        top = np.array([rng.uniform(lo[0], hi[0]), rng.uniform(lo[1], hi[1]), hi[2]])
+        if all(not (np.all(top[:2] > b_lo[:2]) and np.all(top[:2] < b_hi[:2]) and b_lo[2] == hi[2])
+               for b_lo, b_hi in boxes):
+            tops.append(top)
+    points = np.array(on_floor + tops)
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    total = all_form_factors(scene, points, normals).sum(axis=1)
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_agrees_with_shapely_oracle(seed):
+    scene, boxes, size = room_scene(seed)
+    rng = np.random.default_rng(300 + seed)
+    points = free_points(boxes, size, 12, rng)
+    normals = random_normals(rng, 12)
+    compared = 0
+    for source in range(scene.n_polygons):
+        ours = exact_form_factors(scene, points, normals, source)
+        others = [scene.polygon(j) for j in range(scene.n_polygons) if j != source]
+        for i in range(len(points)):
+            expected = oracle_form_factor(points[i], normals[i], scene.polygon(source), others)
+            assert abs(ours[i] - expected) <= 1e-9 * max(expected, 1e-3), (source, i, ours[i], expected)
+            compared += expected > 0
+    assert compared > 50
+
+
+def test_scale_invariance():
+    rng = np.random.default_rng(7)
+    base, boxes, size = room_scene(11)
+    points = free_points(boxes, size, 20, rng)
+    normals = random_normals(rng, 20)
+    reference = all_form_factors(base, points, normals)
+    for scale in (1e-3, 1e4):
+        scaled, _, _ = room_scene(11, scale)
+        np.testing.assert_allclose(all_form_factors(scaled, points * scale, normals), reference, rtol=0, atol=1e-9)
+
+
+def simple_shadow_scene():
+    vertices = [[0, 0, 2], [1, 0, 2], [1, 1, 2], [0, 1, 2],
+                [-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0],
+                [0.25, 0.25, 1], [0.75, 0.25, 1], [0.75, 0.75, 1], [0.25, 0.75, 1]]
+    polygons = [[0, 3, 2, 1], [4, 5, 6, 7], [8, 9, 10, 11]]
+    emission = np.zeros((3, 3))
+    emission[0] = 1.0
+    return Scene.from_polygons(vertices, polygons, np.full((3, 3), 0.5), emission)
+
+
+def test_view_boundary_generators_and_lambert_over_boundary():
+    scene = simple_shadow_scene()
+    point, normal = np.array([0.2, 0.5, 0.0]), np.array([0.0, 0.0, 1.0])
+    view = exact_view(scene, point, normal, 0)
+    # from (0.2, 0.5, 0) the square at height 1 projects to x in [0.3, 1.3] on the light: visible x in [0, 0.3]
+    expected = point_polygon_ff([point], [normal], np.array([[0, 0, 2], [0.3, 0, 2], [0.3, 1, 2], [0, 1, 2.0]]))
+    assert view.form_factor == pytest.approx(expected[0], abs=1e-12)
+    blocker_segments = view.segments[view.generators[:, 0] == 2]
+    assert len(blocker_segments) == 1
+    np.testing.assert_allclose(blocker_segments[0][:, 0], 0.3, atol=1e-12)
+    local_edge = view.generators[view.generators[:, 0] == 2][0, 1]
+    blocker = scene.polygon(2)
+    np.testing.assert_allclose(blocker[[local_edge, (local_edge + 1) % 4], 0], 0.25)
+    # Lambert over the boundary alone (pieces' shared edges cancelled) gives the same form factor
+    signed = 0.0
+    for a, b in view.segments:
+        ra, rb = a - point, b - point
+        cross = np.cross(ra, rb)
+        signed += np.arctan2(np.linalg.norm(cross), ra @ rb) * (cross @ normal) / np.linalg.norm(cross)
+    assert abs(signed) / (2 * np.pi) == pytest.approx(view.form_factor, abs=1e-12)
+
+
+def test_horizon_generator():
+    scene = simple_shadow_scene()
+    view = exact_view(scene, [3.0, 0.5, 1.0], [-1.0, 0.0, 0.0], 0)
+    assert view.form_factor > 0.0
+    assert HORIZON not in view.generators[:, 0]
+    tilted = exact_view(scene, [0.5, 0.5, 1.5], [1.0, 0.0, 0.0], 0)
+    assert HORIZON in tilted.generators[:, 0]
+
+
+def test_blocker_subset_and_bad_input():
+    scene = simple_shadow_scene()
+    point, normal = [[0.5, 0.5, 0.0]], [[0.0, 0.0, 1.0]]
+    assert exact_form_factors(scene, point, normal, 0)[0] == 0.0
+    free = exact_form_factors(scene, point, normal, 0, blockers=[1])[0]
+    assert free == pytest.approx(point_polygon_ff(point, normal, scene.polygon(0))[0], abs=1e-14)
+    with pytest.raises(SceneError, match="source polygon 9"):
+        exact_form_factors(scene, point, normal, 9)
+    with pytest.raises(SceneError, match="blocker 7"):
+        exact_form_factors(scene, point, normal, 0, blockers=[7])
+    with pytest.raises(SceneError, match="normal 0 is zero"):
+        exact_form_factors(scene, point, [[0.0, 0.0, 0.0]], 0)
+    with pytest.raises(SceneError, match="finite"):
+        exact_form_factors(scene, [[np.nan, 0.0, 0.0]], normal, 0)
