@@ -38,7 +38,8 @@ class BVH:
     """A bounding volume hierarchy; every array is read-only.
 
     node_min, node_max (M, 3) float64; node_child, node_first, node_count (M,) int64; order (P,) int64;
-    box_min, box_max (P, 3) float64 primitive boxes (grown by pad); depth: levels below the root; pad: how far each primitive box was grown on every side at build time.
+    box_min, box_max (P, 3) float64 primitive boxes (grown by pad); depth: levels below the root;
+    pad: how far each primitive box was grown on every side at build time.
     """
 
     node_min: np.ndarray
@@ -60,6 +61,22 @@ class BVH:
     def n_primitives(self) -> int:
         return len(self.order)
 
+    @property
+    def arrays(self) -> tuple:
+        """The leading arguments of every numba traversal helper, in order:
+        (node_min, node_max, node_child, node_first, node_count, order, box_min, box_max),
+        e.g. `bvh_collect_in_planes(*bvh.arrays, planes, 0.0, out)`."""
+        return (
+            self.node_min,
+            self.node_max,
+            self.node_child,
+            self.node_first,
+            self.node_count,
+            self.order,
+            self.box_min,
+            self.box_max,
+        )
+
     def query_planes(self, planes, slack: float = 0.0) -> np.ndarray:
         """Sorted primitive ids whose box is not cut away by any of the half-spaces n . x + d <= 0.
 
@@ -74,23 +91,15 @@ class BVH:
         if not np.isfinite(slack) or slack < 0.0:
             raise ValueError(f"slack must be a finite distance >= 0, got {slack}")
         out = np.empty(max(self.n_primitives, 1), dtype=np.int64)
-        count = bvh_collect_in_planes(
-            self.node_min, self.node_max, self.node_child, self.node_first, self.node_count, self.order,
-            self.box_min, self.box_max,
-            rows, float(slack), out,
-        )
+        count = bvh_collect_in_planes(*self.arrays, rows, float(slack), out)
         return np.sort(out[:count])
 
     def query_segment(self, start, end) -> np.ndarray:
-        """Sorted primitive ids whose box the closed segment start-end (3,), (3,) meets. Returns (Q,) int64."""
+        """Sorted primitive ids whose box meets the closed segment start-end (3,). Returns (Q,) int64."""
         a = _point(start, "start")
         b = _point(end, "end")
         out = np.empty(max(self.n_primitives, 1), dtype=np.int64)
-        count = bvh_collect_on_segment(
-            self.node_min, self.node_max, self.node_child, self.node_first, self.node_count, self.order,
-            self.box_min, self.box_max,
-            a, b, out,
-        )
+        count = bvh_collect_on_segment(*self.arrays, a, b, out)
         return np.sort(out[:count])
 
 
@@ -107,7 +116,8 @@ def build_bvh_from_boxes(box_min, box_max, pad: float = 0.0) -> BVH:
         if array.ndim != 2 or array.shape[1] != 3:
             raise SceneError(f"{name} must have shape (P, 3), got {array.shape}")
         if not np.isfinite(array).all():
-            raise SceneError(f"{name} has a non-finite coordinate (box {int(np.argwhere(~np.isfinite(array))[0, 0])})")
+            bad = int(np.argwhere(~np.isfinite(array))[0, 0])
+            raise SceneError(f"{name} has a non-finite coordinate (box {bad})")
     if lo.shape != hi.shape:
         raise SceneError(f"box_min {lo.shape} and box_max {hi.shape} must have the same shape")
     if len(lo) == 0:
