@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 from numba.typed import List
 
+from .bvh import build_bvh, bvh_collect_in_planes
 from .errors import SceneError
 from .formfactor import lambert_sum
 from .scene import Scene
@@ -64,7 +65,8 @@ def exact_form_factors(scene: Scene, points, normals, source: int, blockers=None
     pts, nrm = _check_points(points, normals)
     _check_source(scene, source)
     allowed = _allowed_mask(scene, blockers)
-    return _form_factors(pts, nrm, source, allowed, *_scene_arrays(scene), scene.tol.length)
+    tree = bvh if bvh is not None else scene_bvh(scene)
+    return _form_factors(pts, nrm, source, allowed, *_scene_arrays(scene), *tree.arrays, scene.tol.length)
 
 
 def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None) -> View:
@@ -75,8 +77,9 @@ def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None
     pts, nrm = _check_points(np.reshape(point, (1, 3)), np.reshape(normal, (1, 3)))
     _check_source(scene, source)
     allowed = _allowed_mask(scene, blockers)
+    tree = bvh if bvh is not None else scene_bvh(scene)
     pieces_xy, pieces_gen, frame = _point_view(
-        pts[0], nrm[0], source, allowed, *_scene_arrays(scene), scene.tol.length
+        pts[0], nrm[0], source, allowed, *_scene_arrays(scene), *tree.arrays, scene.tol.length
     )
     origin, u, v, scale = frame[0], frame[1], frame[2], frame[3][0]
     pieces = [origin + scale * (xy[:, :1] * u + xy[:, 1:2] * v) for xy in pieces_xy]
@@ -128,26 +131,39 @@ def _allowed_mask(scene: Scene, blockers) -> np.ndarray:
     return allowed
 
 
+_BVH_OF_SCENE: dict[int, tuple] = {}
+
+
+def scene_bvh(scene: Scene):
+    """The BVH over the scene's polygons, built once per scene and kept for the last scene asked."""
+    cached = _BVH_OF_SCENE.get(id(scene))
+    if cached is None or cached[0] is not scene:
+        _BVH_OF_SCENE.clear()
+        cached = (scene, build_bvh(scene))
+        _BVH_OF_SCENE[id(scene)] = cached
+    return cached[1]
+
+
 def _scene_arrays(scene: Scene):
     return (
         scene.polygon_offsets,
         scene.polygon_points,
         scene.normals,
         scene.plane_offsets,
-        scene.polygon_min,
-        scene.polygon_max,
     )
 
 
 @njit(cache=True)
-def _form_factors(points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets,
-                  poly_min, poly_max, eps):
+def _form_factors(
+    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+):
     count = len(points)
     result = np.empty(count)
     for i in range(count):
         pieces_xy, _, frame = _point_view(
             points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets,
-            poly_min, poly_max, eps,
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
         )
         result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
     return result
@@ -434,7 +450,8 @@ def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
 
 @njit(cache=True)
 def _point_view(
-    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, poly_min, poly_max, eps
+    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
 ):
     """Visible pieces of `source` from `point`, in the source's 2-D frame.
 
@@ -488,6 +505,8 @@ def _point_view(
     centre /= m
     side_normals = np.empty((m, 3))
     side_offsets = np.empty(m)
+    # the shaft for the BVH, as outward half-spaces n . x + d <= 0: the sides, the source plane, the point's
+    shaft = np.empty((m + 2, 4))
     for j in range(m):
         a = visible3[j] - point
         b = visible3[(j + 1) % m] - point
@@ -501,11 +520,21 @@ def _point_view(
             w = -w
         side_normals[j] = w
         side_offsets[j] = -(w * point).sum()
+        shaft[j, :3] = -w
+        shaft[j, 3] = -side_offsets[j]
+    oriented = n_source * sign
+    shaft[m, :3] = -oriented
+    shaft[m, 3] = -sign * plane_offsets[source]
+    shaft[m + 1, :3] = oriented
+    shaft[m + 1, 3] = sign * plane_offsets[source] - height
 
-    for blocker in range(len(offsets) - 1):
+    candidates = np.empty(len(order), dtype=np.int64)
+    found = bvh_collect_in_planes(
+        node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, shaft, eps, candidates
+    )
+    for index in range(found):
+        blocker = candidates[index]
         if blocker == source or not allowed[blocker]:
-            continue
-        if _box_outside(poly_min[blocker], poly_max[blocker], side_normals, side_offsets):
             continue
         polygon = corners[offsets[blocker] : offsets[blocker + 1]]
         nb = poly_normals[blocker]
@@ -547,19 +576,6 @@ def _empty_pieces(frame):
     pieces_xy.pop()
     pieces_labels.pop()
     return pieces_xy, pieces_labels, frame
-
-
-@njit(cache=True)
-def _box_outside(box_min, box_max, plane_normals, plane_offsets):
-    """True when the box lies entirely outside one of the half-spaces n . x + c >= 0."""
-    for j in range(len(plane_normals)):
-        n = plane_normals[j]
-        best = plane_offsets[j]
-        for c in range(3):
-            best += n[c] * (box_max[c] if n[c] > 0.0 else box_min[c])
-        if best < 0.0:
-            return True
-    return False
 
 
 @njit(cache=True)
