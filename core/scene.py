@@ -290,7 +290,9 @@ def _convex_pieces(points: np.ndarray, loop: np.ndarray, index: int, tol: Tolera
     twice_area = float(np.linalg.norm(newell))
     perimeter = float(steps.sum())
     if len(loop) < 3 or perimeter == 0.0 or twice_area / perimeter <= tol.length:
-        raise SceneError(f"polygon {index} has zero area (its vertices are coincident or collinear)")
+        raise SceneError(
+            f"polygon {index} has zero area (its vertices are coincident or collinear, or it folds onto itself)"
+        )
     normal = newell / twice_area
     u, v = _frame(normal)
     flat = np.stack([corners @ u, corners @ v], axis=1)
