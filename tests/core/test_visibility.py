@@ -138,3 +138,22 @@ def test_blocker_subset_and_bad_input():
         exact_form_factors(scene, point, [[0.0, 0.0, 0.0]], 0)
     with pytest.raises(SceneError, match="finite"):
         exact_form_factors(scene, [[np.nan, 0.0, 0.0]], normal, 0)
+
+
+def test_agrees_with_monte_carlo_within_error_bars():
+    from core.raycast import jittered_form_factors
+    from core.visibility import scene_bvh
+
+    scene, boxes, size = room_scene(2)
+    ceiling = int(np.argmin(scene.normals[:6, 2]))  # the room's ceiling faces down
+    rng = np.random.default_rng(5)
+    points = free_points(boxes, size, 40, rng)
+    normals = random_normals(rng, 40)
+    exact = exact_form_factors(scene, points, normals, ceiling)
+    bvh = scene_bvh(scene)
+    runs = np.stack([jittered_form_factors(scene, bvh, points, normals, ceiling, 64, seed=s) for s in range(24)])
+    mean = runs.mean(axis=0)
+    error_bar = runs.std(axis=0, ddof=1) / np.sqrt(len(runs))
+    assert np.count_nonzero(exact) > 20
+    # 5 standard errors, plus a floor for points whose estimates all agree (zero spread)
+    assert np.all(np.abs(mean - exact) <= 5 * error_bar + 1e-12)
