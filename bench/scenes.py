@@ -593,11 +593,12 @@ def desk() -> SceneSpec:
 
 def many_lights() -> SceneSpec:
     """Seed 000's "Many Lights": the Desk geometry with its large lights turned down and 8 small bright lights
-    added (one under the desk lamp's head, seven 0.12 m ceiling spots). 452 polygons."""
+    added (one under the desk lamp's head, seven 0.12 m ceiling spots). 452 polygons: the paper's version has
+    492, its small lights were probably not single quads."""
     b, lamp_head = _desk_builder("many-lights", large_light_exitance=20.0)
     _pad_with_panels(b, DESK_POLYGONS, _desk_decals(*_DESK_ROOM[:2]))
     b.light("lamp light", lamp_head - (0, 0, 0.001), DOWN, 0.1, 0.1, 600.0 * WARM_WHITE)
-    sx, sy, sz = _DESK_ROOM
+    sz = _DESK_ROOM[2]
     spots = ((0.7, 0.7), (0.7, 4.3), (3.0, 1.0), (3.0, 4.0), (5.3, 0.7), (5.3, 4.3), (3.0, 2.5))
     for i, (x, y) in enumerate(spots):
         b.light(f"ceiling light spot {i}", (x, y, sz - 0.01), DOWN, 0.12, 0.12, 800.0 * WARM_WHITE)
