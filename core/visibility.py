@@ -41,6 +41,10 @@ class View:
         of the source; another polygon: an edge of a blocker (an EV swath through the point), or, with local
         edge FACE_CROSSING, the line where that blocker's face crosses the source's plane; polygon HORIZON:
         the receiver's tangent plane.
+    corners: (C, 3) float64 corners of the boundary, where two generators meet.
+    corner_lines: C extremal lines through the point and each corner: ("VV", vertex id) when the corner is
+        the image of a scene vertex (the line passes through the point and that vertex), else
+        ("VEE", (polygon, edge), (polygon, edge)) with the two generators of the segments meeting there.
     form_factor: the exact occluded form factor (projected solid angle of the visible region over pi).
     """
 
@@ -50,6 +54,8 @@ class View:
     pieces: list
     segments: np.ndarray
     generators: np.ndarray
+    corners: np.ndarray
+    corner_lines: list
     form_factor: float
 
 
@@ -87,16 +93,55 @@ def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None
     for piece in pieces:
         total += lambert_sum(pts[0], nrm[0], piece, len(piece))
     segments, generators = _boundary(list(pieces_xy), list(pieces_gen), scene.tol.length / scale)
-    segments3 = origin + scale * (segments[..., :1] * u + segments[..., 1:2] * v)
+    segments3 = (origin + scale * (segments[..., :1] * u + segments[..., 1:2] * v)).reshape(-1, 2, 3)
+    corners, corner_lines = _corners(scene, pts[0], segments3, generators, scene.tol.length)
     return View(
         point=pts[0],
         normal=nrm[0],
         source=int(source),
         pieces=pieces,
-        segments=segments3.reshape(-1, 2, 3),
+        segments=segments3,
         generators=generators,
+        corners=corners,
+        corner_lines=corner_lines,
         form_factor=abs(total) / (2.0 * np.pi),
     )
+
+
+def _corners(scene: Scene, point, segments, generators, eps):
+    """Where consecutive boundary segments meet, and the extremal line through the point and that corner."""
+    corners = []
+    lines = []
+    for i in range(len(segments)):
+        end = segments[i, 1]
+        following = np.flatnonzero(np.linalg.norm(segments[:, 0] - end, axis=1) <= eps)
+        for j in following:
+            first, second = (int(g) for g in generators[i]), (int(g) for g in generators[j])
+            first, second = tuple(first), tuple(second)
+            corners.append(end)
+            vertex = _shared_vertex(scene, point, end, first, second, eps)
+            lines.append(("VV", vertex) if vertex >= 0 else ("VEE", first, second))
+    return np.array(corners).reshape(-1, 3), lines
+
+
+def _shared_vertex(scene: Scene, point, corner, first, second, eps) -> int:
+    """The scene vertex both generators end at, when the corner lies on the line (point, that vertex)."""
+    candidates = set()
+    for polygon, edge in (first, second):
+        if polygon < 0 or edge < 0:
+            return -1
+        ids = scene.polygon_vertices(polygon)
+        candidates.add(frozenset((int(ids[edge]), int(ids[(edge + 1) % len(ids)]))))
+    shared = set.intersection(*[set(c) for c in candidates]) if len(candidates) == 2 else set()
+    if len(candidates) == 1:
+        shared = set(next(iter(candidates)))
+    for vertex in shared:
+        direction = scene.vertices[vertex] - point
+        offset = corner - point
+        distance = np.linalg.norm(np.cross(direction, offset)) / max(np.linalg.norm(direction), eps)
+        if distance <= eps and direction @ offset > 0.0:
+            return vertex
+    return -1
 
 
 def _check_points(points, normals):

@@ -113,6 +113,14 @@ def test_view_boundary_generators_and_lambert_over_boundary():
         cross = np.cross(ra, rb)
         signed += np.arctan2(np.linalg.norm(cross), ra @ rb) * (cross @ normal) / np.linalg.norm(cross)
     assert abs(signed) / (2 * np.pi) == pytest.approx(view.form_factor, abs=1e-12)
+    # corners: two source corners seen through the point (VV), two where the blocker's edge crosses the source's
+    lines = {tuple(np.round(c, 9)): line for c, line in zip(view.corners, view.corner_lines, strict=True)}
+    assert len(lines) == 4
+    assert lines[(0.0, 0.0, 2.0)] == ("VV", 0)  # scene vertex 0 is the light's corner (0, 0, 2)
+    assert lines[(0.0, 1.0, 2.0)][0] == "VV"
+    for corner in [(0.3, 0.0, 2.0), (0.3, 1.0, 2.0)]:
+        kind, first, second = lines[corner]
+        assert kind == "VEE" and {first[0], second[0]} == {0, 2}
 
 
 def test_horizon_generator():
