@@ -44,7 +44,7 @@ _TWO_PI = 2.0 * np.pi
 
 @dataclass(frozen=True, eq=False)
 class SegmentContacts:
-    """Every polygon one open segment meets, sorted by t (then kind, then polygon id).
+    """Every polygon one open segment meets, sorted by t; at one point (within tol) by kind, then polygon id.
 
     polygon (K,) int64; t (K,) float64 in (0, 1), the point being start + t (end - start) (for SLIDING, where
     the overlap begins); kind (K,) int8 CONTACT_*; feature (K,) int64: the edge id (EDGE), vertex id (VERTEX),
@@ -109,7 +109,7 @@ def first_hits(scene, bvh, origins, directions, t_max=None):
     """The first polygon each ray origin + t direction meets for t in (0, t_max], of any contact kind.
 
     origins, directions (N, 3) float64 (directions nonzero, any length; t is in units of each direction);
-    t_max: None (to the scene's bounding box), a float, or (N,) floats > 0.
+    t_max: None (past the scene: to its bounding box grown by its diagonal), a float, or (N,) floats > 0.
     Contacts within tol.length of the origin are ignored (origins may lie on surfaces). Ties within tol.length
     go to the lower contact kind (INTERIOR first), then the lower polygon id.
     Returns polygon (N,) int64 (-1 none), t (N,) float64 (inf for none), contact (N,) int8 CONTACT_*.
@@ -121,7 +121,8 @@ def first_hits(scene, bvh, origins, directions, t_max=None):
     if np.any(lengths == 0.0):
         raise ValueError(f"directions[{int(np.flatnonzero(lengths == 0.0)[0])}] is zero")
     if t_max is None:
-        reach = _box_exit(o, d, scene.bbox_min - scene.tol.length, scene.bbox_max + scene.tol.length)
+        # far past the scene, so no crossing inside it sits within tol of the ray's end
+        reach = _box_exit(o, d, scene.bbox_min - scene.diagonal, scene.bbox_max + scene.diagonal)
     else:
         reach = np.array(np.broadcast_to(np.asarray(t_max, dtype=np.float64), (len(o),)), copy=True)
         if not np.all(reach > 0.0) or not np.isfinite(reach).all():
@@ -239,7 +240,7 @@ def _geometry(scene) -> tuple:
 
 
 def _box_exit(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Ray parameter where each ray leaves the box lo-hi, at least the parameter of one tol step."""
+    """Ray parameter where each ray leaves the box lo-hi (1 for rays that never meet it going forward)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         a = (lo[None, :] - origins) / directions
         b = (hi[None, :] - origins) / directions
@@ -337,7 +338,11 @@ def _polygon_contact(points, offsets, normals, plane_offsets, polygon, start, en
 
 @njit(cache=True)
 def _sliding_contact(points, first, count, normal, start, end, tol):
-    """A segment lying in the polygon's plane: SLIDING from where it enters the polygon (grown by tol)."""
+    """A segment lying in the polygon's plane: SLIDING when it overlaps the polygon grown by tol.
+
+    t is where it enters the polygon itself (not the grown one, so that contacts at one point agree on t),
+    or, when it only grazes the polygon within tol, the nearest point of the grown overlap.
+    """
     dx = end[0] - start[0]
     dy = end[1] - start[1]
     dz = end[2] - start[2]
@@ -346,6 +351,7 @@ def _sliding_contact(points, first, count, normal, start, end, tol):
         return CONTACT_NONE, 0.0, -1
     lo = tol / length
     hi = 1.0 - lo
+    entry = lo
     for k in range(count):
         a = points[first + k]
         b = points[first + (k + 1) % count]
@@ -359,9 +365,10 @@ def _sliding_contact(points, first, count, normal, start, end, tol):
             hi = min(hi, (tol - offset) / rate)
         else:
             lo = max(lo, (tol - offset) / rate)
+            entry = max(entry, -offset / rate)
         if lo > hi:
             return CONTACT_NONE, 0.0, -1
-    return CONTACT_SLIDING, lo, -1
+    return CONTACT_SLIDING, min(max(entry, lo), hi), -1
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -567,24 +574,34 @@ def _gather_contacts(
 
 
 @njit(cache=True)
-def _sort_contacts(polygon, t, kind, local, count):
-    """Insertion sort of the first `count` contacts by (t, kind, polygon), in place (counts are small)."""
+def _sort_contacts(polygon, t, kind, local, count, same_point):
+    """Sort the first `count` contacts in place by t; contacts at one point (t chained within same_point)
+    by kind, then polygon, so that rounding in t never decides their order. Insertion sorts: counts are small.
+    """
     for i in range(1, count):
-        p = polygon[i]
-        tt = t[i]
-        kk = kind[i]
-        ll = local[i]
-        j = i - 1
-        while j >= 0 and (t[j] > tt or (t[j] == tt and (kind[j] > kk or (kind[j] == kk and polygon[j] > p)))):
-            polygon[j + 1] = polygon[j]
-            t[j + 1] = t[j]
-            kind[j + 1] = kind[j]
-            local[j + 1] = local[j]
+        j = i
+        while j > 0 and t[j - 1] > t[j]:
+            _swap_contacts(polygon, t, kind, local, j - 1, j)
             j -= 1
-        polygon[j + 1] = p
-        t[j + 1] = tt
-        kind[j + 1] = kk
-        local[j + 1] = ll
+    group = 0
+    while group < count:
+        end = group + 1
+        while end < count and t[end] - t[end - 1] <= same_point:
+            end += 1
+        for i in range(group + 1, end):
+            j = i
+            while j > group and (kind[j - 1] > kind[j] or (kind[j - 1] == kind[j] and polygon[j - 1] > polygon[j])):
+                _swap_contacts(polygon, t, kind, local, j - 1, j)
+                j -= 1
+        group = end
+
+
+@njit(cache=True)
+def _swap_contacts(polygon, t, kind, local, i, j):
+    polygon[i], polygon[j] = polygon[j], polygon[i]
+    t[i], t[j] = t[j], t[i]
+    kind[i], kind[j] = kind[j], kind[i]
+    local[i], local[j] = local[j], local[i]
 
 
 @njit(cache=True)
@@ -622,7 +639,8 @@ def segment_blocked(
         node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
         start, end, skip_a, skip_b, tol, False, True, polygon, t, kind, local,
     )  # fmt: skip
-    _sort_contacts(polygon, t, kind, local, found)
+    direction = end - start
+    _sort_contacts(polygon, t, kind, local, found, tol / np.sqrt(_dot(direction, direction)))
     return _boundary_contacts_block(
         points, offsets, normals, start, end, polygon, t, kind, local, found, tol, angle_tol
     )
@@ -681,7 +699,9 @@ def _contacts_batch(
             starts[i], ends[i], -1, -1, tol, False, False,
             polygon[lo:hi], t[lo:hi], kind[lo:hi], local[lo:hi],
         )  # fmt: skip
-        _sort_contacts(polygon[lo:hi], t[lo:hi], kind[lo:hi], local[lo:hi], hi - lo)
+        segment = ends[i] - starts[i]
+        same_point = tol / np.sqrt(_dot(segment, segment))
+        _sort_contacts(polygon[lo:hi], t[lo:hi], kind[lo:hi], local[lo:hi], hi - lo, same_point)
         for j in range(lo, hi):
             if kind[j] == CONTACT_INTERIOR:
                 blocked[i] = True
