@@ -10,7 +10,7 @@ seed papers (shared/seeds/README.md):
   turned down and 8 small bright lights added), ``indirect_bedroom()`` (534 polygons, one small lamp that
   emits downwards only) and ``village()`` (312 polygons, buildings and cars under an overhead rectangle):
   the scenes of seed 000, section 7.2, rebuilt from their descriptions (the originals are not public);
-* ``cornell_box()``: the published Cornell box (shared/data/cornell_box.json), the one scene whose exact
+* ``cornell_box()``: the published Cornell box (bench/data/cornell_box.json), the one scene whose exact
   geometry and materials are public;
 * ``closed_furnished_room(seed)``: random closed rooms of boxes resting, stacked, floating and touching, for
   robustness tests (coplanar and touching faces are the degenerate cases of visibility events).
@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-CORNELL_BOX_JSON = Path(__file__).resolve().parents[2] / "shared" / "data" / "cornell_box.json"
+# a verbatim copy of the steering repository's shared/data/cornell_box.json, so a clone is self-contained
+CORNELL_BOX_JSON = Path(__file__).resolve().parent / "data" / "cornell_box.json"
 
 OFFICE_SIZES = (84, 168, 312, 432, 756, 1056, 1488)
 
@@ -787,7 +788,7 @@ def village() -> SceneSpec:
 
 
 # ---------------------------------------------------------------------------------------------------------
-# Cornell box (shared/data/cornell_box.json).
+# Cornell box (bench/data/cornell_box.json, a copy of shared/data/cornell_box.json).
 
 
 def cornell_box(z_up: bool = True) -> SceneSpec:
@@ -803,8 +804,8 @@ def cornell_box(z_up: bool = True) -> SceneSpec:
     """
     if not CORNELL_BOX_JSON.is_file():
         raise FileNotFoundError(
-            f"Cornell box data not found at {CORNELL_BOX_JSON}: the scene needs shared/data/cornell_box.json "
-            "next to the repository (the sibling of /work/main)"
+            f"Cornell box data not found at {CORNELL_BOX_JSON}: restore bench/data/cornell_box.json "
+            "(a copy of the steering repository's shared/data/cornell_box.json)"
         )
     data = json.loads(CORNELL_BOX_JSON.read_text())
     if data["units"]["length"] != "mm":
