@@ -523,7 +523,7 @@ def _gather_contacts(
     points, offsets, normals, plane_offsets,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
     start, end, skip_a, skip_b, tol, stop_at_interior, boundary_only,
-    out_polygon, out_t, out_kind, out_local,
+    out_polygon, out_t, out_kind, out_local, stack,
 ):  # fmt: skip
     """Contacts of the open segment with every polygon but skip_a, skip_b, in traversal order.
 
@@ -534,7 +534,6 @@ def _gather_contacts(
     inv = inverse_direction(direction)
     capacity = out_polygon.shape[0]
     found = 0
-    stack = np.empty(STACK_SIZE, dtype=np.int64)
     stack[0] = 0
     top = 1
     while top > 0:
@@ -615,15 +614,38 @@ def segment_blocked(
     points (N, 3), offsets (P+1,), normals (P, 3), plane_offsets (P,): scene.polygon_points,
     scene.polygon_offsets, scene.normals, scene.plane_offsets; then the eight arrays of `BVH.arrays`;
     start, end (3,) float64; skip_a, skip_b: polygon ids to ignore (-1 none); tol = scene.tol.length,
-    angle_tol = scene.tol.cosine. Returns True when the segment is blocked.
+    angle_tol = scene.tol.cosine. Returns True when the segment is blocked. Loops over many segments should
+    call `_segment_blocked_with` with one `_workspace()` instead, to allocate once.
     """
-    none_i = np.empty(0, dtype=np.int64)
-    none_f = np.empty(0)
-    none_k = np.empty(0, dtype=np.int8)
+    stack, none_i, none_f, none_k = _workspace()
+    return _segment_blocked_with(
+        points, offsets, normals, plane_offsets,
+        node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
+        start, end, skip_a, skip_b, tol, angle_tol, stack, none_i, none_f, none_k,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _workspace():
+    """A traversal stack and the empty buffers of a counting pass, reusable for any number of segments."""
+    return (
+        np.empty(STACK_SIZE, dtype=np.int64),
+        np.empty(0, dtype=np.int64),
+        np.empty(0),
+        np.empty(0, dtype=np.int8),
+    )
+
+
+@njit(cache=True)
+def _segment_blocked_with(
+    points, offsets, normals, plane_offsets,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
+    start, end, skip_a, skip_b, tol, angle_tol, stack, none_i, none_f, none_k,
+):  # fmt: skip
     found = _gather_contacts(
         points, offsets, normals, plane_offsets,
         node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-        start, end, skip_a, skip_b, tol, True, True, none_i, none_f, none_k, none_i,
+        start, end, skip_a, skip_b, tol, True, True, none_i, none_f, none_k, none_i, stack,
     )  # fmt: skip
     if found < 0:
         return True
@@ -637,7 +659,7 @@ def segment_blocked(
     _gather_contacts(
         points, offsets, normals, plane_offsets,
         node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-        start, end, skip_a, skip_b, tol, False, True, polygon, t, kind, local,
+        start, end, skip_a, skip_b, tol, False, True, polygon, t, kind, local, stack,
     )  # fmt: skip
     direction = end - start
     _sort_contacts(polygon, t, kind, local, found, tol / np.sqrt(_dot(direction, direction)))
@@ -657,11 +679,12 @@ def _occluded_batch(
     starts, ends, skip, tol, angle_tol,
 ):  # fmt: skip
     result = np.zeros(starts.shape[0], dtype=np.bool_)
+    stack, none_i, none_f, none_k = _workspace()
     for i in range(starts.shape[0]):
-        result[i] = segment_blocked(
+        result[i] = _segment_blocked_with(
             points, offsets, normals, plane_offsets,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-            starts[i], ends[i], skip[i, 0], skip[i, 1], tol, angle_tol,
+            starts[i], ends[i], skip[i, 0], skip[i, 1], tol, angle_tol, stack, none_i, none_f, none_k,
         )  # fmt: skip
     return result
 
@@ -673,15 +696,13 @@ def _contacts_batch(
     starts, ends, tol, angle_tol,
 ):  # fmt: skip
     n = starts.shape[0]
-    none_i = np.empty(0, dtype=np.int64)
-    none_f = np.empty(0)
-    none_k = np.empty(0, dtype=np.int8)
+    stack, none_i, none_f, none_k = _workspace()
     csr = np.zeros(n + 1, dtype=np.int64)
     for i in range(n):
         found = _gather_contacts(
             points, offsets, normals, plane_offsets,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-            starts[i], ends[i], -1, -1, tol, False, False, none_i, none_f, none_k, none_i,
+            starts[i], ends[i], -1, -1, tol, False, False, none_i, none_f, none_k, none_i, stack,
         )  # fmt: skip
         csr[i + 1] = csr[i] + found
     total = csr[n]
@@ -697,7 +718,7 @@ def _contacts_batch(
             points, offsets, normals, plane_offsets,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
             starts[i], ends[i], -1, -1, tol, False, False,
-            polygon[lo:hi], t[lo:hi], kind[lo:hi], local[lo:hi],
+            polygon[lo:hi], t[lo:hi], kind[lo:hi], local[lo:hi], stack,
         )  # fmt: skip
         segment = ends[i] - starts[i]
         same_point = tol / np.sqrt(_dot(segment, segment))
@@ -861,6 +882,7 @@ def _jittered_batch(
     weight = area / (rays * np.pi)
     tol2 = tol * tol
     sample = np.empty(3)
+    stack, none_i, none_f, none_k = _workspace()
     result = np.zeros(receivers.shape[0])
     for i in range(receivers.shape[0]):
         p = receivers[i]
@@ -893,10 +915,10 @@ def _jittered_batch(
             kernel = cos_p * cos_s / r2
             if kernel <= 0.0:
                 continue
-            if segment_blocked(
+            if _segment_blocked_with(
                 points, offsets, normals, plane_offsets,
                 node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-                p, sample, source, -1, tol, angle_tol,
+                p, sample, source, -1, tol, angle_tol, stack, none_i, none_f, none_k,
             ):  # fmt: skip
                 continue
             accumulated += kernel
