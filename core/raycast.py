@@ -124,7 +124,10 @@ def first_hits(scene, bvh, origins, directions, t_max=None):
         # far past the scene, so no crossing inside it sits within tol of the ray's end
         reach = _box_exit(o, d, scene.bbox_min - scene.diagonal, scene.bbox_max + scene.diagonal)
     else:
-        reach = np.array(np.broadcast_to(np.asarray(t_max, dtype=np.float64), (len(o),)), copy=True)
+        try:
+            reach = np.array(np.broadcast_to(np.asarray(t_max, dtype=np.float64), (len(o),)), copy=True)
+        except (TypeError, ValueError):
+            raise ValueError(f"t_max must be None, a number or ({len(o)},) numbers") from None
         if not np.all(reach > 0.0) or not np.isfinite(reach).all():
             raise ValueError("t_max must be finite and > 0")
     polygon, t, contact = _first_hits_batch(*_geometry(scene), *bvh.arrays, o, d, reach, scene.tol.length)
