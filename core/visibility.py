@@ -195,19 +195,20 @@ def _scene_arrays(scene: Scene):
         scene.polygon_points,
         scene.normals,
         scene.plane_offsets,
+        scene.areas,
     )
 
 
 @njit(cache=True)
 def _form_factors(
-    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets,
+    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
 ):
     count = len(points)
     result = np.empty(count)
     for i in range(count):
         pieces_xy, _, frame = _point_view(
-            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets,
+            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
         )
         result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
@@ -495,7 +496,7 @@ def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
 
 @njit(cache=True)
 def _point_view(
-    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets,
+    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, areas,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
 ):
     """Visible pieces of `source` from `point`, in the source's 2-D frame.
@@ -587,6 +588,7 @@ def _point_view(
             continue
         below = True
         above = True
+        on_plane = True
         for j in range(len(polygon)):
             h = sign * (
                 n_source[0] * polygon[j, 0]
@@ -598,18 +600,52 @@ def _point_view(
                 below = False
             if h < height:
                 above = False
-        if below or above:
+            if abs(h) > eps:
+                on_plane = False
+        if on_plane:
+            if not _covers(blocker, source, areas):
+                continue
+            projected, projected_labels = _footprint(polygon, blocker, origin, u, v, radius, eps2)
+        elif below or above:
             continue
-        projected, projected_labels = _project_blocker(
-            polygon, blocker, point, n_source * sign, sign * plane_offsets[source], height,
-            side_normals, side_offsets, side_labels, origin, u, v, radius, eps2,
-        )
+        else:
+            projected, projected_labels = _project_blocker(
+                polygon, blocker, point, n_source * sign, sign * plane_offsets[source], height,
+                side_normals, side_offsets, side_labels, origin, u, v, radius, eps2,
+            )
         if len(projected) == 0:
             continue
         pieces_xy, pieces_labels = _subtract(pieces_xy, pieces_labels, projected, projected_labels, eps2)
         if len(pieces_xy) == 0:
             break
     return pieces_xy, pieces_labels, frame
+
+
+@njit(cache=True)
+def _covers(blocker, source, areas):
+    """Contact rule for two coplanar polygons that overlap: the smaller one lies on the larger one.
+
+    A rug on a floor, a poster on a wall, a box bottom resting on a floor: the covered part of the larger polygon
+    can never be seen, and counting both would see that region twice. Equal areas (duplicated faces): the lower
+    index covers, so exactly one of the two is seen.
+    """
+    return areas[blocker] < areas[source] or (areas[blocker] == areas[source] and blocker < source)
+
+
+@njit(cache=True)
+def _footprint(polygon, blocker, origin, u, v, radius, eps2):
+    """A polygon lying in the source's plane, in the source's 2-D frame, counter-clockwise, with generators."""
+    k = len(polygon)
+    xy = np.empty((k, 2))
+    labels = np.empty((k, 2), dtype=np.int64)
+    for j in range(k):
+        d = polygon[j] - origin
+        xy[j, 0] = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / radius
+        xy[j, 1] = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / radius
+        labels[j, 0] = blocker
+        labels[j, 1] = j
+    xy, labels = _orient_ccw(xy, labels)
+    return _cleanup(xy, labels, eps2)
 
 
 @njit(cache=True)

@@ -165,3 +165,44 @@ def test_agrees_with_monte_carlo_within_error_bars():
     assert np.count_nonzero(exact) > 20
     # 5 standard errors, plus a floor for points whose estimates all agree (zero spread)
     assert np.all(np.abs(mean - exact) <= 5 * error_bar + 1e-12)
+
+
+def test_polygon_lying_on_another_hides_what_it_covers():
+    """A rug lying on the floor: the floor under it is hidden by contact, and nothing is seen twice."""
+    floor = [[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]]
+    rug = [[1, 1, 0], [2.5, 1, 0], [2.5, 2, 0], [1, 2, 0]]
+    scene = Scene.from_polygons(floor + rug, [[0, 1, 2, 3], [4, 5, 6, 7]], np.full((2, 3), 0.5), np.zeros((2, 3)))
+    points = np.array([[1.7, 1.4, 0.8], [3.5, 3.0, 0.3], [0.2, 0.1, 2.0]])
+    normals = random_normals(np.random.default_rng(3), 3)
+    normals[:, 2] = -np.abs(normals[:, 2])
+    floor_ff = exact_form_factors(scene, points, normals, 0)
+    rug_ff = exact_form_factors(scene, points, normals, 1)
+    expected_floor = point_polygon_ff(points, normals, np.array(floor, float)) - point_polygon_ff(
+        points, normals, np.array(rug, float)
+    )
+    np.testing.assert_allclose(floor_ff, expected_floor, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rug_ff, point_polygon_ff(points, normals, np.array(rug, float)), rtol=1e-13)
+
+
+@pytest.mark.parametrize("name", ["office-312", "desk", "indirect-bedroom"])
+def test_closed_room_identity_on_benchmark_scenes(name):
+    """Rugs and posters lying exactly on floors and walls, turned boxes, lamps in shades, touching furniture."""
+    from bench.scenes import SCENES
+
+    spec = SCENES[name]()
+    scene = spec.build()
+    rng = np.random.default_rng(17)
+    candidates = rng.uniform(scene.bbox_min + 0.01, scene.bbox_max - 0.01, size=(600, 3))
+    outside_objects = np.ones(len(candidates), dtype=bool)
+    for obj, kind in enumerate(spec.object_kinds):
+        polygons = np.flatnonzero(scene.object_ids == obj)
+        if kind == "room" or len(polygons) == 0:
+            continue
+        lo = scene.polygon_min[polygons].min(axis=0) - 0.01
+        hi = scene.polygon_max[polygons].max(axis=0) + 0.01
+        outside_objects &= ~np.all((candidates > lo) & (candidates < hi), axis=1)
+    points = candidates[outside_objects][:30]
+    assert len(points) == 30
+    normals = random_normals(rng, len(points))
+    total = all_form_factors(scene, points, normals).sum(axis=1)
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
