@@ -1,0 +1,501 @@
+"""HPolygon / HTriangulation / HEdge: the hierarchy of constrained Delaunay triangulations (section 3.1).
+
+Elements are numbered globally: element p < P is input polygon p (an HPolygon, level 0); every other element
+is a triangle of the constrained Delaunay triangulation (an HTriangulation, built with pythoncdt) that
+subdivides its parent. The children of an element are created together and have consecutive ids.
+
+HEdges are segments shared by every element, at any level, whose side is exactly that segment; splitting an
+HEdge at a vertex gives it two sub-HEdges. Inserting a point on an element's side splits the HEdge there
+(the same vertex for the neighbour: matching); after each subdivision step every leaf whose side was split
+is subdivided with the split points (anchoring), so leaves conform. Sides of different input polygons with
+the same two endpoints are twins: splitting one splits the others at the same 3-D point.
+"""
+
+import numpy as np
+import pythoncdt
+from scipy.spatial import cKDTree
+
+from .frames import build_frames, shared_edges
+from .geometry import (
+    barycentric,
+    clip_segment_to_polygon,
+    cross2,
+    side_parameters,
+)
+from .grid import GridSettings, interior_grid_points, side_grid_parameters
+
+# The triangulation works on integers, 1/16 of the length tolerance: points further apart than the
+# tolerance never share a cell, and coordinates stay far below 2**53 (1e9 tolerances across the scene).
+_CDT_UNITS_PER_TOLERANCE = 16.0
+
+# Point location compares points with all children of an element at once; this bounds that array's size.
+_LOCATE_BATCH = 1 << 20
+
+
+class _Column:
+    """A growable array of rows: amortised O(1) append, views of the filled part without copying."""
+
+    def __init__(self, width: int, dtype, fill):
+        self._width = width
+        self._fill = fill
+        self.buf = np.full((256, width) if width else 256, fill, dtype=dtype)
+        self.size = 0
+
+    def grow(self, count: int) -> int:
+        """Reserve `count` rows; return the index of the first."""
+        start = self.size
+        need = start + count
+        if need > len(self.buf):
+            capacity = max(need, 2 * len(self.buf))
+            bigger = np.full((capacity, self._width) if self._width else capacity, self._fill, dtype=self.buf.dtype)
+            bigger[:start] = self.buf[:start]
+            self.buf = bigger
+        self.size = need
+        return start
+
+    @property
+    def data(self) -> np.ndarray:
+        return self.buf[: self.size]
+
+
+class HierarchyCore:
+    """The hierarchical triangulations of a set of convex planar polygons (see the package docstring)."""
+
+    def __init__(self, polygons: list, tolerance, grid: GridSettings | None = None):
+        self.polygons = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in polygons]
+        for i, p in enumerate(self.polygons):
+            if len(p) < 3:
+                raise ValueError(f"polygon {i}: needs at least 3 corners, got {len(p)}")
+        self.tol = tolerance
+        self.eps = float(tolerance.length)
+        self.grid = grid or GridSettings()
+        self.frames = build_frames(self.polygons, self.eps)
+        self.polygon_count = len(self.polygons)
+
+        # vertices
+        self._xy = _Column(2, np.float64, 0.0)
+        self._v_polygon = _Column(0, np.int64, -1)
+        self._v_level = _Column(0, np.int64, -1)
+        self._v_element = _Column(0, np.int64, -1)
+        self._v_anc = _Column(3, np.int64, -1)
+        self._v_w = _Column(3, np.float64, 0.0)
+        self._v_constrained = _Column(0, np.bool_, False)
+        # elements
+        self._e_polygon = _Column(0, np.int64, -1)
+        self._e_level = _Column(0, np.int64, 0)
+        self._e_parent = _Column(0, np.int64, -1)
+        self._e_vertices = _Column(3, np.int64, -1)
+        self._e_hedges = _Column(3, np.int64, -1)
+        self._e_first_child = _Column(0, np.int64, -1)
+        self._e_child_count = _Column(0, np.int64, 0)
+        # HEdges: plain lists, because the matching walks them one node at a time
+        self._he_a: list[int] = []
+        self._he_b: list[int] = []
+        self._he_kids: list = []
+        self._he_split: list[int] = []
+        self._he_elements: list[list[int]] = []
+        self._he_constrained: list[bool] = []
+        self._he_twins: dict[int, list] = {}
+        self._dirty: list[int] = []
+        self._queue: dict[int, list] = {}
+
+        self._root_corners: list[np.ndarray] = []
+        self._root_hedges: list[list[int]] = []
+        self._root_fans: list[np.ndarray] = []
+        for p in range(self.polygon_count):
+            self._add_root(p)
+        for pa, sa, pb, sb, flipped in shared_edges(self.polygons, self.eps):
+            ha = self._root_hedges[pa][sa]
+            hb = self._root_hedges[pb][sb]
+            self._he_twins.setdefault(ha, []).append((hb, flipped))
+            self._he_twins.setdefault(hb, []).append((ha, flipped))
+
+    # ------------------------------------------------------------------ construction helpers
+
+    def _new_vertices(self, polygon: int, xy: np.ndarray, constrained: bool = False) -> np.ndarray:
+        count = len(xy)
+        start = self._xy.grow(count)
+        for column in (self._v_polygon, self._v_level, self._v_element, self._v_anc, self._v_w):
+            column.grow(count)
+        self._v_constrained.grow(count)
+        self._xy.buf[start : start + count] = xy
+        self._v_polygon.buf[start : start + count] = polygon
+        self._v_constrained.buf[start : start + count] = constrained
+        return np.arange(start, start + count)
+
+    def _new_hedge(self, a: int, b: int, constrained: bool = False) -> int:
+        self._he_a.append(a)
+        self._he_b.append(b)
+        self._he_kids.append(None)
+        self._he_split.append(-1)
+        self._he_elements.append([])
+        self._he_constrained.append(constrained)
+        return len(self._he_a) - 1
+
+    def _new_elements(self, count: int, polygon: int, level: int, parent: int) -> int:
+        start = self._e_polygon.grow(count)
+        for column in (
+            self._e_level, self._e_parent, self._e_vertices, self._e_hedges, self._e_first_child,
+            self._e_child_count,
+        ):
+            column.grow(count)
+        self._e_polygon.buf[start : start + count] = polygon
+        self._e_level.buf[start : start + count] = level
+        self._e_parent.buf[start : start + count] = parent
+        return start
+
+    def _add_root(self, p: int) -> None:
+        corners_2d = self.frames.corners_2d[p]
+        ids = self._new_vertices(p, corners_2d)
+        self._v_level.buf[ids] = 0
+        element = self._new_elements(1, p, 0, -1)
+        assert element == p
+        hedges = []
+        k = len(ids)
+        for i in range(k):
+            h = self._new_hedge(int(ids[i]), int(ids[(i + 1) % k]))
+            self._he_elements[h].append(element)
+            hedges.append(h)
+        self._root_corners.append(ids)
+        self._root_hedges.append(hedges)
+        # Below the first subdivision a polygon's radiosity is linear on a fan of its corners.
+        self._root_fans.append(np.stack([np.full(k - 2, ids[0]), ids[1:-1], ids[2:]], axis=1))
+
+    # ------------------------------------------------------------------ element queries
+
+    def _sides(self, element: int) -> tuple:
+        if element < self.polygon_count:
+            return self._root_corners[element], self._root_hedges[element]
+        return self._e_vertices.buf[element], self._e_hedges.buf[element]
+
+    def is_leaf(self, element: int) -> bool:
+        return self._e_child_count.buf[element] == 0
+
+    def _chain(self, hedge: int, forward: bool) -> tuple:
+        """Leaf sub-HEdges of hedge in side order, and the vertex each starts from: (vertices, leaves)."""
+        leaves = []
+        stack = [hedge]
+        while stack:
+            h = stack.pop()
+            kids = self._he_kids[h]
+            if kids is None:
+                leaves.append(h)
+            else:
+                stack.append(kids[1])
+                stack.append(kids[0])
+        if forward:
+            return [self._he_a[h] for h in leaves], leaves
+        leaves.reverse()
+        return [self._he_b[h] for h in leaves], leaves
+
+    # ------------------------------------------------------------------ matching
+
+    def _side_vertex(self, hedge: int, forward: bool, t_side: float) -> int:
+        """The vertex at parameter t_side along an element side (its HEdge `hedge`, in side order): an
+        existing vertex within the tolerance, or a new one splitting the leaf sub-HEdge there."""
+        xy = self._xy.buf
+        a = xy[self._he_a[hedge]]
+        b = xy[self._he_b[hedge]]
+        t = t_side if forward else 1.0 - t_side
+        direction = b - a
+        length = float(np.hypot(direction[0], direction[1]))
+        snap = self.eps / length
+
+        def param(vertex: int) -> float:
+            return float((xy[vertex] - a) @ direction) / (length * length)
+
+        h = hedge
+        while True:
+            kids = self._he_kids[h]
+            if kids is None:
+                break
+            ts = param(self._he_split[h])
+            if abs(t - ts) <= snap:
+                return self._he_split[h]
+            h = kids[0] if t < ts else kids[1]
+        ta = param(self._he_a[h])
+        tb = param(self._he_b[h])
+        if abs(t - ta) <= snap:
+            return self._he_a[h]
+        if abs(t - tb) <= snap:
+            return self._he_b[h]
+        return self._split_leaf(h, (t - ta) / (tb - ta))
+
+    def _split_leaf(self, hedge: int, t_local: float) -> int:
+        """Split a leaf HEdge and all its twins at local parameter t_local; return hedge's new vertex."""
+        group = [(hedge, False)] + self._he_twins.get(hedge, [])
+        xy = self._xy.buf
+        low, high, made = [], [], []
+        for member, flipped in group:
+            a = self._he_a[member]
+            b = self._he_b[member]
+            t = 1.0 - t_local if flipped else t_local
+            position = xy[a] + t * (xy[b] - xy[a])
+            vertex = int(self._new_vertices(int(self._v_polygon.buf[a]), position[None, :])[0])
+            xy = self._xy.buf
+            constrained = self._he_constrained[member]
+            first = self._new_hedge(a, vertex, constrained)
+            second = self._new_hedge(vertex, b, constrained)
+            self._he_kids[member] = (first, second)
+            self._he_split[member] = vertex
+            self._dirty.append(member)
+            low.append((second, flipped) if flipped else (first, flipped))
+            high.append((first, flipped) if flipped else (second, flipped))
+            made.append(vertex)
+        if len(group) > 1:
+            for side in (low, high):
+                for i, (h, fi) in enumerate(side):
+                    self._he_twins[h] = [(g, fi ^ fj) for j, (g, fj) in enumerate(side) if j != i]
+        return made[0]
+
+    # ------------------------------------------------------------------ subdivision of one element
+
+    def _subdivide(self, element: int, points: np.ndarray, segments: np.ndarray, step: float | None) -> bool:
+        """Build the sub-triangulation of leaf `element` with points (M, 2), segments (S, 2, 2) clipped to
+        it, the grid of spacing `step` (None: no grid) and every point already on its sides.
+        Returns False when there was nothing to insert (the element stays a leaf)."""
+        eps = self.eps
+        corners, hedges = self._sides(element)
+        corners = [int(c) for c in corners]
+        hedges = [int(h) for h in hedges]
+        k = len(corners)
+        forward = [self._he_a[hedges[i]] == corners[i] for i in range(k)]
+        corner_xy = self._xy.buf[corners].copy()
+        side_a = corner_xy
+        side_b = np.roll(corner_xy, -1, axis=0)
+        side_lengths = np.linalg.norm(side_b - side_a, axis=1)
+
+        features = np.concatenate([points.reshape(-1, 2), segments.reshape(-1, 2)])
+        feature_vertex = np.full(len(features), -1, dtype=np.int64)
+        feature_sides = np.zeros((len(features), k), dtype=bool)
+        interior_xy = np.zeros((0, 2))
+        if len(features):
+            t, distance = side_parameters(features, side_a, side_b)
+            feature_sides = distance <= eps
+            inside = cross2(side_b - side_a, features[:, None, :] - side_a) / side_lengths
+            on_boundary = feature_sides.any(axis=1)
+            ring_now = [v for s in range(k) for v in self._chain(hedges[s], forward[s])[0]]
+            ring_xy = self._xy.buf[ring_now]
+            for f in np.nonzero(on_boundary)[0]:
+                # Near a sharp corner a point can be within the tolerance of a vertex on another side.
+                gap = np.hypot(*(ring_xy - features[f]).T)
+                if gap.min() <= eps:
+                    feature_vertex[f] = ring_now[int(np.argmin(gap))]
+                    continue
+                s = int(np.argmin(distance[f]))
+                feature_vertex[f] = self._side_vertex(hedges[s], forward[s], float(t[f, s]))
+            interior = np.nonzero(~on_boundary & (inside.min(axis=1) > 0.0))[0]
+            unique_xy, representative = _merge_close(features[interior], eps)
+            feature_vertex[interior] = -2 - representative
+            interior_xy = unique_xy
+
+        seg_ends = feature_vertex[len(points) :].reshape(-1, 2)
+        seg_sides = feature_sides[len(points) :].reshape(-1, 2, k)
+        keep = (seg_ends[:, 0] != seg_ends[:, 1]) & (seg_ends != -1).all(axis=1)
+        keep &= ~(seg_sides[:, 0] & seg_sides[:, 1]).any(axis=1)
+        seg_ends = seg_ends[keep]
+
+        if step is not None:
+            radius = self.grid.skip_radius * step
+            feature_xy = features[feature_vertex != -1]
+            for s in range(k):
+                chain, _ = self._chain(hedges[s], forward[s])
+                away = np.concatenate([self._xy.buf[chain], feature_xy])
+                for tg in side_grid_parameters(side_a[s], side_b[s], step, away, radius, eps):
+                    self._side_vertex(hedges[s], forward[s], float(tg))
+            grid_xy = interior_grid_points(corner_xy, step, feature_xy, segments[keep], radius, eps)
+            interior_xy = np.concatenate([interior_xy, grid_xy])
+
+        ring, ring_hedges = [], []
+        for s in range(k):
+            chain, leaves = self._chain(hedges[s], forward[s])
+            ring.extend(chain)
+            ring_hedges.extend(leaves)
+        n_ring = len(ring)
+        if n_ring == k and len(interior_xy) == 0 and len(seg_ends) == 0:
+            return False
+
+        polygon = int(self._e_polygon.buf[element])
+        interior_ids = self._new_vertices(polygon, interior_xy)
+        ring_position = {v: i for i, v in enumerate(ring)}
+        seg_local = np.array(
+            [[ring_position[v] if v >= 0 else n_ring - 2 - v for v in pair] for pair in seg_ends.tolist()],
+            dtype=np.int64,
+        ).reshape(-1, 2)
+
+        # The triangulation sees integer coordinates in units of the length tolerance: its in-circle ties
+        # (regular grids are full of cocircular points) then break identically at every scene scale.
+        unit = eps / _CDT_UNITS_PER_TOLERANCE
+        cdt = pythoncdt.Triangulation(
+            pythoncdt.VertexInsertionOrder.AS_PROVIDED,
+            pythoncdt.IntersectingConstraintEdges.TRY_RESOLVE,
+            _CDT_UNITS_PER_TOLERANCE,
+        )
+        cdt_xy = np.concatenate([self._xy.buf[ring], interior_xy])
+        origin = corner_xy[0]
+        cdt.insert_vertices(np.ascontiguousarray(np.round((cdt_xy - origin) / unit)))
+        ring_local = np.arange(n_ring)
+        edges = np.concatenate([np.stack([ring_local, np.roll(ring_local, -1)], axis=1), seg_local])
+        cdt.insert_edges(np.ascontiguousarray(edges, dtype=np.uint32))
+        cdt.erase_outer_triangles()
+        out_xy = cdt.vertices_array()
+        triangles = cdt.triangles_array()["vertices"].astype(np.int64)
+        extra = len(out_xy) - len(cdt_xy)
+        crossing_xy = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
+        crossing_xy = _exact_crossings(crossing_xy, cdt_xy[seg_local])
+        crossing_ids = self._new_vertices(polygon, crossing_xy, True)
+        global_of_local = np.concatenate([np.asarray(ring, dtype=np.int64), interior_ids, crossing_ids])
+        assert len(global_of_local) == len(cdt_xy) + extra
+
+        constrained_pairs = set()
+        if len(seg_local):
+            for e in cdt.fixed_edges:
+                u, v = e.v1, e.v2
+                if not (u < n_ring and v < n_ring and (v - u) % n_ring in (1, n_ring - 1)):
+                    constrained_pairs.add((min(u, v), max(u, v)))
+                    self._v_constrained.buf[global_of_local[[u, v]]] = True
+
+        level = int(self._e_level.buf[element]) + 1
+        self._set_ancestry(element, corners, global_of_local, level)
+
+        count = len(triangles)
+        first = self._new_elements(count, polygon, level, element)
+        self._e_first_child.buf[element] = first
+        self._e_child_count.buf[element] = count
+        self._e_vertices.buf[first : first + count] = global_of_local[triangles]
+        ring_edge = {(i, (i + 1) % n_ring): ring_hedges[i] for i in range(n_ring)}
+        inner_edge: dict = {}
+        child_hedges = np.empty((count, 3), dtype=np.int64)
+        he_elements = self._he_elements
+        for c in range(count):
+            tri = triangles[c]
+            for j in range(3):
+                u = int(tri[j])
+                v = int(tri[(j + 1) % 3])
+                h = ring_edge.get((u, v))
+                if h is None:
+                    key = (u, v) if u < v else (v, u)
+                    h = inner_edge.get(key)
+                    if h is None:
+                        h = self._new_hedge(int(global_of_local[u]), int(global_of_local[v]), key in constrained_pairs)
+                        inner_edge[key] = h
+                child_hedges[c, j] = h
+                he_elements[h].append(first + c)
+        self._e_hedges.buf[first : first + count] = child_hedges
+        return True
+
+    def _set_ancestry(self, element: int, corners: list, vertices: np.ndarray, level: int) -> None:
+        """Vertices first appearing in element's sub-triangulation get it as ancestor (barycentric coords)."""
+        fresh = vertices[self._v_level.buf[vertices] < 0]
+        if len(fresh) == 0:
+            return
+        xy = self._xy.buf[fresh]
+        if element < self.polygon_count:
+            fan = self._root_fans[element]
+            coords = barycentric(self._xy.buf[fan], xy)
+            best = np.argmax(coords.min(axis=2), axis=1)
+            ancestors = fan[best]
+            weights = coords[np.arange(len(fresh)), best]
+        else:
+            ancestors = np.broadcast_to(np.asarray(corners, dtype=np.int64), (len(fresh), 3))
+            weights = barycentric(self._xy.buf[corners][None, :, :], xy)[:, 0, :]
+        self._v_level.buf[fresh] = level
+        self._v_element.buf[fresh] = element
+        self._v_anc.buf[fresh] = ancestors
+        self._v_w.buf[fresh] = weights
+
+    # ------------------------------------------------------------------ routing insertions to leaves
+
+    def _element_corners_xy(self, elements: np.ndarray) -> np.ndarray:
+        return self._xy.buf[self._e_vertices.buf[elements]]
+
+    def _locate(self, polygon: int, points: np.ndarray) -> np.ndarray:
+        """Leaf elements of polygon containing points (M, 2): (M,) int64."""
+        current = np.full(len(points), polygon, dtype=np.int64)
+        while True:
+            counts = self._e_child_count.buf[current]
+            if not counts.any():
+                return current
+            for element in np.unique(current[counts > 0]):
+                idx = np.nonzero(current == element)[0]
+                first = int(self._e_first_child.buf[element])
+                kids = np.arange(first, first + int(self._e_child_count.buf[element]))
+                triangles = self._element_corners_xy(kids)
+                batch = max(1, _LOCATE_BATCH // len(kids))
+                for start in range(0, len(idx), batch):
+                    part = idx[start : start + batch]
+                    coords = barycentric(triangles, points[part])
+                    current[part] = kids[np.argmax(coords.min(axis=2), axis=1)]
+
+    def _route_segment(self, polygon: int, p: np.ndarray, q: np.ndarray) -> None:
+        """Clip segment p q (2-D) to the polygon and queue its pieces on the leaves it crosses."""
+        stack = [(polygon, p, q)]
+        while stack:
+            element, a, b = stack.pop()
+            if self.is_leaf(element):
+                self._queue_item(element, 1, np.stack([a, b]))
+                continue
+            first = int(self._e_first_child.buf[element])
+            kids = np.arange(first, first + int(self._e_child_count.buf[element]))
+            t_in, t_out = clip_segment_to_polygon(self._element_corners_xy(kids), a, b)
+            length = float(np.linalg.norm(b - a))
+            for i in np.nonzero((t_out - t_in) * length > self.eps)[0]:
+                stack.append((int(kids[i]), a + t_in[i] * (b - a), a + t_out[i] * (b - a)))
+
+    def _queue_item(self, element: int, kind: int, item) -> None:
+        entry = self._queue.setdefault(element, [[], [], None])
+        if kind == 2:
+            entry[2] = item
+        else:
+            entry[kind].append(item)
+
+    def _run_queue(self) -> tuple:
+        """Subdivide every queued leaf, then anchor. Returns (elements subdivided, elements anchored)."""
+        queue, self._queue = self._queue, {}
+        subdivided = 0
+        for element in sorted(queue):
+            points, segments, step = queue[element]
+            pts = np.array(points, dtype=np.float64).reshape(-1, 2)
+            segs = np.array(segments, dtype=np.float64).reshape(-1, 2, 2)
+            subdivided += bool(self._subdivide(element, pts, segs, step))
+        anchored = 0
+        empty_points = np.zeros((0, 2))
+        empty_segments = np.zeros((0, 2, 2))
+        while self._dirty:
+            h = self._dirty.pop()
+            for element in self._he_elements[h]:
+                if self.is_leaf(element):
+                    anchored += bool(self._subdivide(element, empty_points, empty_segments, None))
+        return subdivided, anchored
+
+
+def _merge_close(points: np.ndarray, eps: float) -> tuple:
+    """Merge points (M, 2) closer than eps: (unique (U, 2), representative (M,) index into unique)."""
+    if len(points) == 0:
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+    if len(points) <= 64:
+        close = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2) <= eps
+        first = np.argmax(close, axis=1)
+    else:
+        first = np.array([min(ball) for ball in cKDTree(points).query_ball_point(points, eps)], dtype=np.int64)
+    keepers, representative = np.unique(first, return_inverse=True)
+    return points[keepers], representative
+
+
+def _exact_crossings(estimates: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Recompute crossing points (M, 2), found on rounded coordinates, as the exact intersection of the two
+    segments (S, 2, 2) passing nearest to each estimate."""
+    if len(estimates) == 0:
+        return estimates
+    a = segments[:, 0]
+    d = segments[:, 1] - a
+    length = np.linalg.norm(d, axis=1)
+    exact = estimates.copy()
+    for m, x in enumerate(estimates):
+        distance = np.abs(cross2(d, x - a)) / length
+        first, second = np.argsort(distance)[:2]
+        det = cross2(d[first], d[second])
+        if det != 0.0:
+            s = cross2(a[second] - a[first], d[second]) / det
+            exact[m] = a[first] + s * d[first]
+    return exact

@@ -1,0 +1,392 @@
+"""Hierarchical triangulations and lazy-wavelet push-pull (issue 4; seed 000 sections 3, 4.2.2, 6.2)."""
+
+import numpy as np
+import pytest
+
+from core.hierarchy import ANGLE_BINS, GridSettings, Hierarchy
+from core.tolerance import Tolerance
+from tests.core.naive_hierarchy import (
+    barycentric_3d,
+    conformity_problems,
+    piecewise_linear,
+    polygon_area,
+    polygon_centroid,
+    polygon_normal,
+    triangle_area,
+)
+
+
+def box_with_fin(scale=1.0):
+    """A closed box (6 quads sharing every edge) plus a triangle and a pentagon standing on its top: the top
+    front edge is shared by three polygons, the pentagon shares one edge with the top face."""
+    x0, x1, y0, y1, z0, z1 = 0.0, 2.0, 0.0, 1.0, 0.0, 1.5
+    c = {
+        "000": (x0, y0, z0), "100": (x1, y0, z0), "110": (x1, y1, z0), "010": (x0, y1, z0),
+        "001": (x0, y0, z1), "101": (x1, y0, z1), "111": (x1, y1, z1), "011": (x0, y1, z1),
+    }
+    faces = [
+        ["000", "010", "110", "100"], ["001", "101", "111", "011"], ["000", "100", "101", "001"],
+        ["010", "011", "111", "110"], ["000", "001", "011", "010"], ["100", "110", "111", "101"],
+    ]
+    polygons = [np.array([c[k] for k in f], dtype=float) for f in faces]
+    polygons.append(np.array([c["001"], c["101"], (1.0, -0.5, 2.5)]))
+    polygons.append(np.array([c["111"], c["011"], (0.0, 1.28, 2.2), (1.0, 1.52, 2.8), (2.0, 1.28, 2.2)]))
+    return [p * scale for p in polygons]
+
+
+def make(polygons):
+    return Hierarchy(polygons, Tolerance.for_points(np.concatenate(polygons)))
+
+
+def random_points_in(polygon, count, rng):
+    """Uniform random points in a convex polygon (K, 3) via random fan triangles."""
+    k = len(polygon)
+    areas = np.array([triangle_area(polygon[0], polygon[i], polygon[i + 1]) for i in range(1, k - 1)])
+    fan = rng.choice(k - 2, size=count, p=areas / areas.sum()) + 1
+    r1, r2 = rng.random(count), rng.random(count)
+    flip = r1 + r2 > 1.0
+    r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
+    a = polygon[0]
+    return a + r1[:, None] * (polygon[fan] - a) + r2[:, None] * (polygon[fan + 1] - a)
+
+
+def random_segments_on(polygon, count, rng):
+    """Segments (count, 2, 3) centred in a polygon, random direction, length up to 0.4 of its diameter: they
+    cross each other and, near the sides, leave the polygon (to be clipped)."""
+    centres = random_points_in(polygon, count, rng)
+    diameter = np.max(np.linalg.norm(polygon[:, None] - polygon[None], axis=2))
+    normal = np.cross(polygon[1] - polygon[0], polygon[2] - polygon[0])
+    u = (polygon[1] - polygon[0]) / np.linalg.norm(polygon[1] - polygon[0])
+    v = np.cross(normal / np.linalg.norm(normal), u)
+    angle = rng.uniform(0.0, np.pi, count)
+    half = 0.5 * rng.uniform(0.02, 0.4, count) * diameter
+    direction = np.cos(angle)[:, None] * u + np.sin(angle)[:, None] * v
+    return np.stack([centres - half[:, None] * direction, centres + half[:, None] * direction], axis=1)
+
+
+def refine_randomly(h, polygons, rng, steps, items_per_step, grid_steps=2):
+    """Two regular grid steps, then steps of random points and random segments (crossing each other and
+    the polygons' sides, clipped)."""
+    for _ in range(grid_steps):
+        h.queue_regular_grid(h.leaves())
+        h.complete_step()
+    for _ in range(steps):
+        owners = rng.integers(len(polygons), size=items_per_step)
+        is_point = rng.random(items_per_step) < 0.5
+        for p in range(len(polygons)):
+            n_points = int(np.sum((owners == p) & is_point))
+            n_segments = int(np.sum((owners == p) & ~is_point))
+            h.insert_points(p, random_points_in(polygons[p], n_points, rng))
+            h.insert_segments(p, random_segments_on(polygons[p], n_segments, rng))
+        h.complete_step()
+
+
+def leaf_areas(mesh):
+    tri = mesh.vertices[mesh.triangles]
+    return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+
+
+def check_conforming_and_area(h, polygons, relative=1e-12):
+    mesh = h.export_leaves()
+    tol = h.tol.length
+    problems = conformity_problems(
+        mesh.vertices.tolist(), mesh.triangles.tolist(), mesh.triangle_polygon.tolist(),
+        [p.tolist() for p in polygons], tol,
+    )
+    assert problems == [], problems[:10]
+    tri = mesh.vertices[mesh.triangles]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    polygon_normals = np.array([polygon_normal(p.tolist()) for p in polygons])
+    assert np.all(np.einsum("ij,ij->i", normals, polygon_normals[mesh.triangle_polygon]) > 0.0)
+    areas = np.bincount(mesh.triangle_polygon, weights=leaf_areas(mesh), minlength=len(polygons))
+    expected = np.array([polygon_area(p.tolist()) for p in polygons])
+    assert np.all(np.abs(areas - expected) <= relative * expected), np.abs(areas - expected) / expected
+    assert abs(areas.sum() - expected.sum()) <= relative * expected.sum()
+    return mesh
+
+
+def print_statistics(label, h):
+    s = h.statistics()
+    print(f"\n{label}: {s.vertices} vertices, {s.leaves} leaf triangles, {s.elements} elements, depth max "
+          f"{s.max_depth} mean {s.mean_depth:.2f}, leaves per polygon {s.leaves_per_polygon.tolist()}, "
+          f"memory {s.memory_bytes / 2**20:.1f} MiB")
+    print("  smallest angle (deg) bins:        ", ANGLE_BINS.tolist())
+    print("  all leaves:                       ", s.min_angle_histogram.tolist())
+    print("  leaves away from constrained segs:", s.free_min_angle_histogram.tolist())
+    return s
+
+
+# ---------------------------------------------------------------------------------------------- push-pull
+
+
+def test_push_reproduces_linear_functions_after_random_refinement():
+    rng = np.random.default_rng(1)
+    polygons = box_with_fin()
+    h = make(polygons)
+    refine_randomly(h, polygons, rng, steps=3, items_per_step=300)
+    positions = h.vertex_positions()
+    gradient = rng.normal(size=(3, 2))
+    linear = positions @ gradient + np.array([0.3, -2.0])
+    delta = h.lazy_delta(np.arange(h.vertex_count), linear)
+    pushed = h.push(delta)
+    assert np.max(np.abs(pushed - linear)) <= 1e-12 * np.max(np.abs(linear))
+    corners = h.ancestry().level == 0
+    assert np.max(np.abs(delta[~corners])) <= 1e-12 * np.max(np.abs(linear))
+
+
+def test_ancestry_is_the_containing_triangle_of_the_level_above():
+    rng = np.random.default_rng(2)
+    polygons = box_with_fin()
+    h = make(polygons)
+    refine_randomly(h, polygons, rng, steps=1, items_per_step=200)
+    a = h.ancestry()
+    positions = h.vertex_positions()
+    owner = h.vertex_polygon()
+    levels = h.element_level()
+    for v in range(h.vertex_count):
+        if a.level[v] == 0:
+            assert a.element[v] == -1 and np.all(a.ancestors[v] == -1)
+            continue
+        e = a.element[v]
+        assert a.level[v] == levels[e] + 1
+        assert np.all(a.level[a.ancestors[v]] < a.level[v])
+        assert np.all(owner[a.ancestors[v]] == owner[v])
+        if e >= len(polygons):
+            assert sorted(a.ancestors[v]) == sorted(h.element_vertices(e))
+        else:
+            pts = polygons[e].tolist()
+            fan_corners = [positions[c].tolist() for c in a.ancestors[v]]
+            assert any(np.allclose(fan_corners, [pts[0], pts[i], pts[i + 1]], atol=1e-12)
+                       for i in range(1, len(pts) - 1))
+        corners = [positions[c].tolist() for c in a.ancestors[v]]
+        expected = barycentric_3d(positions[v].tolist(), *corners)
+        np.testing.assert_allclose(a.weights[v], expected, atol=1e-9)
+        assert min(a.weights[v]) >= -1e-9
+
+
+def test_push_is_the_recursive_interpolation_of_the_ancestors_plus_delta():
+    rng = np.random.default_rng(7)
+    polygons = box_with_fin()
+    h = make(polygons)
+    refine_randomly(h, polygons, rng, steps=1, items_per_step=200)
+    a = h.ancestry()
+    delta = rng.normal(size=(h.vertex_count, 3))
+    pushed = h.push(delta)
+    memo = {}
+
+    def value(v, channel):
+        if (v, channel) not in memo:
+            total = delta[v, channel]
+            if a.level[v] > 0:
+                total += sum(a.weights[v][i] * value(a.ancestors[v][i], channel) for i in range(3))
+            memo[(v, channel)] = total
+        return memo[(v, channel)]
+
+    for v in np.argsort(a.level):
+        for channel in range(3):
+            assert pushed[v, channel] == pytest.approx(value(v, channel), rel=1e-12, abs=1e-12)
+
+
+def test_pull_of_a_linear_function_is_its_value_at_each_centroid():
+    rng = np.random.default_rng(3)
+    polygons = box_with_fin()
+    h = make(polygons)
+    refine_randomly(h, polygons, rng, steps=2, items_per_step=200)
+    gradient = rng.normal(size=3)
+    pulled = h.pull(h.vertex_positions() @ gradient + 1.0)
+    positions = h.vertex_positions()
+    for e in range(h.element_count):
+        if e < len(polygons):
+            centroid = polygon_centroid(polygons[e].tolist())
+        else:
+            centroid = positions[h.element_vertices(e)].mean(axis=0)
+        assert abs(pulled[e] - (np.dot(centroid, gradient) + 1.0)) <= 1e-12 * 10
+
+
+def test_figure_6_two_sources_refined_differently_on_one_segment():
+    """Seed 000 Fig. 6: segment va vb lit by S1 and S2; v1 refines both, v2 only S2, v3 only S1."""
+    va, vb, vc = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), np.array([0.5, 0.8, 0.0])
+    h = make([np.array([va, vb, vc])])
+    x1, x2, x3 = 0.45, 0.8, 0.15
+    ids = {}
+    for name, x in (("v1", x1), ("v2", x2), ("v3", x3)):
+        h.insert_points(0, np.array([[x, 0.0, 0.0]]))
+        h.complete_step()
+        ids[name] = h.vertex_count - 1
+    ids.update(va=0, vb=1, vc=2)
+    positions = h.vertex_positions()
+    np.testing.assert_allclose(positions[[ids["v1"], ids["v2"], ids["v3"]], 0], [x1, x2, x3], atol=1e-15)
+
+    def s1(p):  # two arbitrary non-linear radiosity functions, one per source
+        return np.exp(1.3 * p[..., 0]) + 0.2 * p[..., 1]
+
+    def s2(p):
+        return 3.0 / (1.0 + 2.0 * p[..., 0] ** 2) - p[..., 1]
+
+    linked_s1 = np.array([ids[k] for k in ("va", "vb", "vc", "v1", "v3")])
+    linked_s2 = np.array([ids[k] for k in ("va", "vb", "vc", "v1", "v2")])
+    delta = np.zeros(h.vertex_count)
+    delta[linked_s1] += h.lazy_delta(linked_s1, s1(positions[linked_s1]))
+    delta[linked_s2] += h.lazy_delta(linked_s2, s2(positions[linked_s2]))
+    at = {k: positions[v] for k, v in ids.items()}
+
+    # Delta B at the refined vertices, computed by hand.
+    def interpolated(source, left, right, x):
+        return piecewise_linear([at[left][0], at[right][0]], [source(at[left]), source(at[right])], x)
+
+    assert delta[ids["v2"]] == pytest.approx(s2(at["v2"]) - interpolated(s2, "v1", "vb", x2), abs=1e-14)
+    assert delta[ids["v3"]] == pytest.approx(s1(at["v3"]) - interpolated(s1, "va", "v1", x3), abs=1e-14)
+    both = s1(at["v1"]) + s2(at["v1"]) - interpolated(s1, "va", "vb", x1) - interpolated(s2, "va", "vb", x1)
+    assert delta[ids["v1"]] == pytest.approx(both, abs=1e-14)
+
+    pushed = h.push(delta)
+    knots_s1 = {0: [0.0, 1.0], 1: [0.0, x1, 1.0], 2: [0.0, x3, x1, 1.0]}
+    knots_s2 = {0: [0.0, 1.0], 1: [0.0, x1, 1.0], 2: [0.0, x1, x2, 1.0]}
+    for level in (0, 1, 2):
+        mesh = h.export_level(level, cut=True, values=pushed)
+        on_segment = {}
+        for tri in mesh.triangles:
+            for j in range(3):
+                u, v = tri[j], tri[(j + 1) % 3]
+                if abs(mesh.vertices[u, 1]) < 1e-15 and abs(mesh.vertices[v, 1]) < 1e-15:
+                    on_segment[u] = on_segment[v] = True
+        knots = sorted(on_segment, key=lambda v: mesh.vertices[v, 0])
+        xs = [mesh.vertices[v, 0] for v in knots]
+        np.testing.assert_allclose(sorted(xs), sorted(set(knots_s1[level]) | set(knots_s2[level])), atol=1e-15)
+        for x in np.linspace(0.0, 1.0, 41):
+            level_value = piecewise_linear(xs, [mesh.values[v] for v in knots], x)
+            expected = piecewise_linear(knots_s1[level], [s1(np.array([k, 0.0])) for k in knots_s1[level]], x)
+            expected += piecewise_linear(knots_s2[level], [s2(np.array([k, 0.0])) for k in knots_s2[level]], x)
+            assert level_value == pytest.approx(expected, abs=1e-13), (level, x)
+
+
+def test_missing_negative_link_is_an_error():
+    h = make([np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])])
+    h.insert_points(0, np.array([[0.2, 0.2, 0.0]]))
+    h.complete_step()
+    with pytest.raises(ValueError, match="negative link"):
+        h.lazy_delta(np.array([0, 3]), np.array([1.0, 2.0]))
+
+
+# ---------------------------------------------------------------------------------------------- structure
+
+
+def test_matching_a_point_on_a_shared_edge_is_one_vertex_and_the_neighbour_is_anchored():
+    """Fig. 5: a point inserted on the diagonal of a square's first triangulation splits both triangles."""
+    square = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    h = make([square])
+    h.insert_points(0, np.array([[0.3, 0.3, 0.0]]))
+    h.complete_step()
+    diagonal = [e for e in h.leaves() if 4 in h.element_vertices(e)]
+    assert len(diagonal) == 4
+    h.insert_points(0, np.array([[0.5, 0.5, 0.0], [0.15, 0.15, 0.0]]))
+    report = h.complete_step()
+    assert report.anchored >= 1
+    mesh = check_conforming_and_area(h, [square])
+    users = [t for t in mesh.triangles.tolist() if h.vertex_count - 1 in t or h.vertex_count - 2 in t]
+    assert len(users) >= 4
+
+
+def test_crossing_segments_create_their_intersection_and_follow_the_segments():
+    square = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    h = make([square])
+    h.queue_regular_grid([0], GridSettings(min_divisions=4, max_divisions=4))
+    h.complete_step()
+    segments = np.array([[[0.1, 0.2, 0.0], [0.9, 0.7, 0.0]], [[0.2, 0.9, 0.0], [0.8, 0.1, 0.0]]])
+    h.insert_segments(0, segments)
+    h.complete_step()
+    mesh = check_conforming_and_area(h, [square])
+    p = segments[:, 0]
+    d = segments[:, 1] - segments[:, 0]
+    s, _ = np.linalg.solve(np.stack([d[0], -d[1]], axis=1)[:2], (p[1] - p[0])[:2])
+    crossing = p[0] + s * d[0]
+    assert np.min(np.linalg.norm(mesh.vertices - crossing, axis=1)) < 1e-12
+    for a, b in segments:  # the leaf edges lying on each segment cover it
+        covered = 0.0
+        for tri in mesh.triangles:
+            for j in range(3):
+                u, v = mesh.vertices[tri[j]], mesh.vertices[tri[(j + 1) % 3]]
+                on = [np.linalg.norm(np.cross(b - a, w - a)) / np.linalg.norm(b - a) < 1e-12 for w in (u, v)]
+                if all(on):
+                    covered += np.linalg.norm(v - u)
+        assert covered == pytest.approx(2 * np.linalg.norm(b - a), rel=1e-12)  # each edge seen from both sides
+
+
+def test_regular_grid_skips_points_near_a_maximum():
+    square = np.array([[0.0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]])
+    h = make([square])
+    settings = GridSettings(min_divisions=8, max_divisions=8, skip_radius=0.5)
+    maximum = np.array([[1.37, 1.21, 0.0]])
+    h.insert_points(0, maximum)
+    h.queue_regular_grid([0], settings)
+    h.complete_step()
+    positions = h.vertex_positions()
+    distance = np.linalg.norm(positions - maximum, axis=1)
+    step = 4.0 / 8
+    assert np.sum(distance < 1e-12) == 1
+    assert np.sort(distance)[1] > 0.5 * step
+    s = h.statistics()
+    assert s.min_angle > 20.0
+    assert 60 <= s.leaves <= 200
+
+
+def test_regular_grid_is_a_function_of_size():
+    small = np.array([[0.0, 0, 0], [0.2, 0, 0], [0.2, 0.2, 0], [0, 0.2, 0]])
+    large = np.array([[1.0, 0, 0], [3.0, 0, 0], [3.0, 2.0, 0], [1.0, 2.0, 0]])
+    h = make([small, large])
+    h.queue_regular_grid([0, 1], GridSettings(target_spacing_relative=0.02, min_divisions=2, max_divisions=64))
+    h.complete_step()
+    per_polygon = h.statistics().leaves_per_polygon
+    assert per_polygon[1] > 20 * per_polygon[0]
+    mean_area = np.array([0.04, 4.0]) / per_polygon
+    assert 0.5 < mean_area[1] / mean_area[0] < 2.0
+
+
+def test_ten_thousand_random_insertions_conform_and_keep_the_area():
+    rng = np.random.default_rng(4)
+    polygons = box_with_fin()
+    h = make(polygons)
+    refine_randomly(h, polygons, rng, steps=10, items_per_step=1000)
+    check_conforming_and_area(h, polygons)
+    s = print_statistics("10 000 random insertions", h)
+    assert s.leaves > 20_000
+    # Random points and segments come arbitrarily close to each other: only segments may force slivers;
+    # away from them the constrained Delaunay triangles stay well shaped.
+    free = s.free_min_angle_histogram
+    assert free[ANGLE_BINS[:-1] < 10.0].sum() <= 0.02 * free.sum()
+    assert free[ANGLE_BINS[:-1] >= 25.0].sum() >= 0.8 * free.sum()
+
+
+def test_scaling_the_scene_changes_nothing():
+    counts = []
+    for scale in (1e-3, 1.0, 1e4):
+        rng = np.random.default_rng(5)
+        polygons = box_with_fin(scale)
+        h = make(polygons)
+        refine_randomly(h, polygons, rng, steps=2, items_per_step=200)
+        check_conforming_and_area(h, polygons)
+        counts.append((h.vertex_count, h.element_count, len(h.leaves())))
+    assert counts[0] == counts[1] == counts[2]
+
+
+def test_export_levels_cover_each_polygon_once():
+    rng = np.random.default_rng(6)
+    polygons = box_with_fin()
+    h = make(polygons)
+    refine_randomly(h, polygons, rng, steps=2, items_per_step=200)
+    expected = np.array([polygon_area(p.tolist()) for p in polygons])
+    deepest = int(h.element_level().max())
+    for level in range(deepest + 1):
+        mesh = h.export_level(level, cut=True)
+        areas = np.bincount(mesh.triangle_polygon, weights=leaf_areas(mesh), minlength=len(polygons))
+        np.testing.assert_allclose(areas, expected, rtol=1e-12)
+        assert np.all(mesh.triangle_level <= level)
+    leaves = h.export_leaves()
+    assert leaves.vertices.shape == (h.vertex_count, 3)
+    assert set(np.unique(leaves.triangles)) == set(range(h.vertex_count))
+
+
+def test_points_outside_the_polygon_are_rejected():
+    h = make([np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])])
+    with pytest.raises(ValueError, match="outside"):
+        h.insert_points(0, np.array([[0.8, 0.8, 0.0]]))
