@@ -52,8 +52,8 @@ def floor_discontinuities(rng, count):
 
 def main(argv) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench hierarchy", description=__doc__.splitlines()[0])
-    parser.add_argument("--spacing", type=float, default=0.0185, help="grid step relative to the scene")
-    parser.add_argument("--segments", type=int, default=600, help="discontinuity segments on the floor")
+    parser.add_argument("--spacing", type=float, default=0.0155, help="grid step relative to the scene")
+    parser.add_argument("--segments", type=int, default=900, help="discontinuity segments on the floor")
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
@@ -67,7 +67,7 @@ def main(argv) -> int:
 
     with Stopwatch() as total:
         with Stopwatch() as sw:
-            h = Hierarchy(polygons, tolerance, GridSettings(target_spacing_relative=args.spacing))
+            h = Hierarchy(polygons, tolerance, GridSettings(target_spacing_relative=args.spacing, max_divisions=64))
             maxima = np.array([[3.0, 2.0, 0.0], [1.2, 3.0, 0.0]])
             h.insert_points(0, maxima)
             h.queue_regular_grid(np.arange(len(polygons)))

@@ -6,11 +6,15 @@ Grid points too close to externally supplied points (light maxima, section 6.3),
 to points already on the element's sides are skipped, so the mesh stays nearly regular around them.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .geometry import cross2, segment_distances
+
+_NO_PARAMETERS = np.zeros(0)
+_NO_POINTS = np.zeros((0, 2))
 
 
 @dataclass(frozen=True)
@@ -39,10 +43,12 @@ def side_grid_parameters(
     """Parameters t in (0, 1) of grid points on side a -> b (2,), evenly spaced about `step` apart,
     without those within `radius` of any point of keep_away (M, 2). Returns (n,) float64, increasing.
     slack (the length tolerance) breaks ties the same way whatever the scene's scale."""
-    length = float(np.linalg.norm(b - a))
-    count = max(1, int(np.floor((length + slack) / step + 0.5)))
+    length = math.hypot(b[0] - a[0], b[1] - a[1])
+    count = int(math.floor((length + slack) / step + 0.5))
+    if count <= 1:
+        return _NO_PARAMETERS
     t = np.arange(1, count) / count
-    if len(t) == 0 or len(keep_away) == 0:
+    if len(keep_away) == 0:
         return t
     points = a[None, :] + t[:, None] * (b - a)[None, :]
     far = np.min(np.linalg.norm(points[:, None, :] - keep_away[None, :, :], axis=2), axis=1) > radius - slack
@@ -64,18 +70,22 @@ def interior_grid_points(
     slack (the length tolerance) resolves the exact ties of regular shapes identically at every scale.
     Returns (N, 2) float64.
     """
-    sides = np.roll(corners, -1, axis=0) - corners
-    lengths = np.linalg.norm(sides, axis=1)
+    sides = np.concatenate([corners[1:], corners[:1]]) - corners
+    lengths = np.sqrt(np.einsum("ij,ij->i", sides, sides))
     longest = int(np.argmax(lengths >= lengths.max() - slack))
+    count = max(1, int(math.floor((lengths[longest] + slack) / step + 0.5)))
+    dx = lengths[longest] / count
+    # No point of a convex polygon is further than 2 area / perimeter from its boundary.
+    area = 0.5 * float(cross2(corners, corners + sides).sum())
+    if 2.0 * area / lengths.sum() <= 0.5 * dx - slack:
+        return _NO_POINTS
     axis = sides[longest] / lengths[longest]
     normal = np.array([-axis[1], axis[0]])
     local = np.stack([(corners - corners[longest]) @ axis, (corners - corners[longest]) @ normal], axis=1)
-    count = max(1, int(np.floor((lengths[longest] + slack) / step + 0.5)))
-    dx = lengths[longest] / count
     dy = dx * np.sqrt(3.0) / 2.0
     rows = np.arange(1, int(np.floor((local[:, 1].max() + slack) / dy)) + 1)
     if len(rows) == 0:
-        return np.zeros((0, 2))
+        return _NO_POINTS
     x_min, x_max = local[:, 0].min(), local[:, 0].max()
     columns = np.arange(int(np.floor(x_min / dx)) - 1, int(np.ceil(x_max / dx)) + 2)
     xs = columns[None, :] * dx + (rows[:, None] % 2) * (0.5 * dx)

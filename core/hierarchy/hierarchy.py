@@ -167,14 +167,19 @@ class Hierarchy(HierarchyCore):
         """Mark leaf elements for grid-like subdivision (section 6.2) at the next complete_step(); points and
         segments queued on them in the same step (e.g. light maxima) keep grid points away."""
         grid = settings or self.grid
-        for element in np.atleast_1d(np.asarray(elements, dtype=np.int64)):
-            element = int(element)
-            if not self.is_leaf(element):
-                raise ValueError(f"element {element} is already subdivided; grid its leaves")
-            corners, _ = self._sides(element)
-            xy = self._xy.buf[np.asarray(corners)]
-            longest = float(np.linalg.norm(np.roll(xy, -1, axis=0) - xy, axis=1).max())
-            self._queue_item(element, 2, grid.step(longest, self.tol.scale))
+        elements = np.atleast_1d(np.asarray(elements, dtype=np.int64))
+        busy = self._e_child_count.buf[elements] > 0
+        if busy.any():
+            raise ValueError(f"element {elements[np.argmax(busy)]} is already subdivided; grid its leaves")
+        longest = np.empty(len(elements))
+        roots = elements < self.polygon_count
+        for i in np.nonzero(roots)[0]:
+            corners = self.frames.corners_2d[elements[i]]
+            longest[i] = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1).max()
+        xy = self._xy.buf[self._e_vertices.buf[elements[~roots]]]
+        longest[~roots] = np.linalg.norm(xy - xy[:, [1, 2, 0]], axis=2).max(axis=1)
+        for element, length in zip(elements.tolist(), longest.tolist(), strict=True):
+            self._queue_item(element, 2, grid.step(length, self.tol.scale))
 
     def complete_step(self) -> StepReport:
         """Build the sub-triangulations of every leaf that received insertions, then anchor (section 3.1)."""

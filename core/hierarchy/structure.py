@@ -28,6 +28,9 @@ from .grid import GridSettings, interior_grid_points, side_grid_parameters
 # tolerance never share a cell, and coordinates stay far below 2**53 (1e9 tolerances across the scene).
 _CDT_UNITS_PER_TOLERANCE = 16.0
 
+_NO_POINTS = np.zeros((0, 2))
+_NO_IDS = np.zeros(0, dtype=np.int64)
+
 # Point location compares points with all children of an element at once; this bounds that array's size.
 _LOCATE_BATCH = 1 << 20
 
@@ -114,6 +117,8 @@ class HierarchyCore:
 
     def _new_vertices(self, polygon: int, xy: np.ndarray, constrained: bool = False) -> np.ndarray:
         count = len(xy)
+        if count == 0:
+            return _NO_IDS
         start = self._xy.grow(count)
         for column in (self._v_polygon, self._v_level, self._v_element, self._v_anc, self._v_w):
             column.grow(count)
@@ -260,19 +265,19 @@ class HierarchyCore:
         hedges = [int(h) for h in hedges]
         k = len(corners)
         forward = [self._he_a[hedges[i]] == corners[i] for i in range(k)]
-        corner_xy = self._xy.buf[corners].copy()
+        corner_xy = self._xy.buf[corners]
         side_a = corner_xy
-        side_b = np.roll(corner_xy, -1, axis=0)
-        side_lengths = np.linalg.norm(side_b - side_a, axis=1)
+        side_b = np.concatenate([corner_xy[1:], corner_xy[:1]])
+        side_vectors = side_b - side_a
+        side_lengths = np.sqrt(np.einsum("ij,ij->i", side_vectors, side_vectors))
 
-        features = np.concatenate([points.reshape(-1, 2), segments.reshape(-1, 2)])
+        features = np.concatenate([points, segments.reshape(-1, 2)]) if len(segments) else points
         feature_vertex = np.full(len(features), -1, dtype=np.int64)
-        feature_sides = np.zeros((len(features), k), dtype=bool)
-        interior_xy = np.zeros((0, 2))
+        interior_xy = _NO_POINTS
         if len(features):
             t, distance = side_parameters(features, side_a, side_b)
             feature_sides = distance <= eps
-            inside = cross2(side_b - side_a, features[:, None, :] - side_a) / side_lengths
+            inside = cross2(side_vectors, features[:, None, :] - side_a) / side_lengths
             on_boundary = feature_sides.any(axis=1)
             ring_now = [v for s in range(k) for v in self._chain(hedges[s], forward[s])[0]]
             ring_xy = self._xy.buf[ring_now]
@@ -290,10 +295,14 @@ class HierarchyCore:
             interior_xy = unique_xy
 
         seg_ends = feature_vertex[len(points) :].reshape(-1, 2)
-        seg_sides = feature_sides[len(points) :].reshape(-1, 2, k)
-        keep = (seg_ends[:, 0] != seg_ends[:, 1]) & (seg_ends != -1).all(axis=1)
-        keep &= ~(seg_sides[:, 0] & seg_sides[:, 1]).any(axis=1)
-        seg_ends = seg_ends[keep]
+        if len(seg_ends):
+            seg_sides = feature_sides[len(points) :].reshape(-1, 2, k)
+            keep = (seg_ends[:, 0] != seg_ends[:, 1]) & (seg_ends != -1).all(axis=1)
+            keep &= ~(seg_sides[:, 0] & seg_sides[:, 1]).any(axis=1)
+            seg_ends = seg_ends[keep]
+            kept_segments = segments[keep]
+        else:
+            kept_segments = segments
 
         if step is not None:
             radius = self.grid.skip_radius * step
@@ -303,8 +312,9 @@ class HierarchyCore:
                 away = np.concatenate([self._xy.buf[chain], feature_xy])
                 for tg in side_grid_parameters(side_a[s], side_b[s], step, away, radius, eps):
                     self._side_vertex(hedges[s], forward[s], float(tg))
-            grid_xy = interior_grid_points(corner_xy, step, feature_xy, segments[keep], radius, eps)
-            interior_xy = np.concatenate([interior_xy, grid_xy])
+            grid_xy = interior_grid_points(corner_xy, step, feature_xy, kept_segments, radius, eps)
+            if len(grid_xy):
+                interior_xy = np.concatenate([interior_xy, grid_xy])
 
         ring, ring_hedges = [], []
         for s in range(k):
@@ -335,17 +345,20 @@ class HierarchyCore:
         origin = corner_xy[0]
         cdt.insert_vertices(np.ascontiguousarray(np.round((cdt_xy - origin) / unit)))
         ring_local = np.arange(n_ring)
-        edges = np.concatenate([np.stack([ring_local, np.roll(ring_local, -1)], axis=1), seg_local])
-        cdt.insert_edges(np.ascontiguousarray(edges, dtype=np.uint32))
+        edges = np.empty((n_ring + len(seg_local), 2), dtype=np.uint32)
+        edges[:n_ring, 0] = ring_local
+        edges[:n_ring, 1] = ring_local + 1
+        edges[n_ring - 1, 1] = 0
+        edges[n_ring:] = seg_local
+        cdt.insert_edges(edges)
         cdt.erase_outer_triangles()
         out_xy = cdt.vertices_array()
         triangles = cdt.triangles_array()["vertices"].astype(np.int64)
-        extra = len(out_xy) - len(cdt_xy)
-        crossing_xy = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
-        crossing_xy = _exact_crossings(crossing_xy, cdt_xy[seg_local])
-        crossing_ids = self._new_vertices(polygon, crossing_xy, True)
+        crossing_ids = _NO_IDS
+        if len(out_xy) > len(cdt_xy):
+            estimates = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
+            crossing_ids = self._new_vertices(polygon, _exact_crossings(estimates, cdt_xy[seg_local]), True)
         global_of_local = np.concatenate([np.asarray(ring, dtype=np.int64), interior_ids, crossing_ids])
-        assert len(global_of_local) == len(cdt_xy) + extra
 
         constrained_pairs = set()
         if len(seg_local):
@@ -363,26 +376,43 @@ class HierarchyCore:
         self._e_first_child.buf[element] = first
         self._e_child_count.buf[element] = count
         self._e_vertices.buf[first : first + count] = global_of_local[triangles]
-        ring_edge = {(i, (i + 1) % n_ring): ring_hedges[i] for i in range(n_ring)}
+        self._e_hedges.buf[first : first + count] = self._child_hedges(
+            first, triangles.tolist(), global_of_local.tolist(), ring_hedges, constrained_pairs
+        )
+        return True
+
+    def _child_hedges(self, first: int, triangles: list, global_of_local: list, ring_hedges: list,
+                      constrained_pairs: set) -> list:
+        """HEdges of new children first.. (local triangles): ring sides reuse the leaf sub-HEdges of the
+        parent's sides, each inner edge gets one new HEdge shared by its two triangles."""
+        n_ring = len(ring_hedges)
+        he_a, he_b, he_kids, he_split = self._he_a, self._he_b, self._he_kids, self._he_split
+        he_elements, he_constrained = self._he_elements, self._he_constrained
         inner_edge: dict = {}
-        child_hedges = np.empty((count, 3), dtype=np.int64)
-        he_elements = self._he_elements
-        for c in range(count):
-            tri = triangles[c]
+        result = []
+        for c, tri in enumerate(triangles):
+            row = []
             for j in range(3):
-                u = int(tri[j])
-                v = int(tri[(j + 1) % 3])
-                h = ring_edge.get((u, v))
-                if h is None:
+                u = tri[j]
+                v = tri[j - 2]
+                if u < n_ring and v == (u + 1) % n_ring:
+                    h = ring_hedges[u]
+                else:
                     key = (u, v) if u < v else (v, u)
                     h = inner_edge.get(key)
                     if h is None:
-                        h = self._new_hedge(int(global_of_local[u]), int(global_of_local[v]), key in constrained_pairs)
+                        h = len(he_a)
+                        he_a.append(global_of_local[u])
+                        he_b.append(global_of_local[v])
+                        he_kids.append(None)
+                        he_split.append(-1)
+                        he_elements.append([])
+                        he_constrained.append(key in constrained_pairs)
                         inner_edge[key] = h
-                child_hedges[c, j] = h
+                row.append(h)
                 he_elements[h].append(first + c)
-        self._e_hedges.buf[first : first + count] = child_hedges
-        return True
+            result.append(row)
+        return result
 
     def _set_ancestry(self, element: int, corners: list, vertices: np.ndarray, level: int) -> None:
         """Vertices first appearing in element's sub-triangulation get it as ancestor (barycentric coords)."""
