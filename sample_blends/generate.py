@@ -173,7 +173,9 @@ def build(sample: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Generate the sample .blend files from bench/scenes.py")
-    parser.add_argument("names", nargs="*", metavar="NAME", help=f"samples to build (default all): {', '.join(SAMPLES)}")
+    parser.add_argument(
+        "names", nargs="*", metavar="NAME", help=f"samples to build (default all): {', '.join(SAMPLES)}"
+    )
     parser.add_argument("--output-dir", type=Path, default=Path(__file__).resolve().parent)
     args = parser.parse_args(argv)
     unknown = sorted(set(args.names) - set(SAMPLES))

@@ -303,7 +303,7 @@ def _light_part(evaluated, name: str, matrix: np.ndarray, warnings: list[str], u
 
     scale_x, scale_y = np.linalg.norm(matrix[:3, 0]), np.linalg.norm(matrix[:3, 1])
     area = width * height * scale_x * scale_y * (math.pi / 4.0 if light.shape in ("DISK", "ELLIPSE") else 1.0)
-    power = np.array(light.color[:3], dtype=np.float64) * light.energy * 2.0 ** light.exposure
+    power = np.array(light.color[:3], dtype=np.float64) * light.energy * 2.0**light.exposure
     normalize = getattr(light, "normalize", True)
     if normalize and not area > 0.0:
         raise SceneError(f'area light "{name}" has zero area (size {width} x {height}, scale {scale_x} x {scale_y})')
