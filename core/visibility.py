@@ -265,30 +265,22 @@ def _source_frame(polygon):
 
 
 @njit(cache=True)
-def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
-    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0.
+def _keep_positive(points, labels, side, cut_polygon, cut_edge):
+    """The part of a convex polygon (K, D) where the signed `side` of its corners (K,) is >= 0.
 
-    labels (K, 2) int64: generator of the edge starting at each corner. The new edge along the plane gets
-    (cut_polygon, cut_edge). Returns the clipped corners and labels (possibly fewer than 3 corners).
+    labels (K, 2) int64: generator of the edge starting at each corner; the new edge along the cut gets
+    (cut_polygon, cut_edge). Returns the kept corners and their labels (possibly fewer than 3 corners).
     """
-    k = len(polygon)
-    out = np.empty((k + 1, 3))
+    k = len(points)
+    out = np.empty((k + 1, points.shape[1]))
     out_labels = np.empty((k + 1, 2), dtype=np.int64)
-    side = np.empty(k)
-    for i in range(k):
-        side[i] = (
-            plane_normal[0] * polygon[i, 0]
-            + plane_normal[1] * polygon[i, 1]
-            + plane_normal[2] * polygon[i, 2]
-            + plane_offset
-        )
     count = 0
     for i in range(k):
         j = (i + 1) % k
         si = side[i]
         sj = side[j]
         if si >= 0.0:
-            out[count] = polygon[i]
+            out[count] = points[i]
             if si == 0.0 and sj < 0.0:
                 out_labels[count, 0] = cut_polygon
                 out_labels[count, 1] = cut_edge
@@ -297,7 +289,7 @@ def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
             count += 1
         if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
             t = si / (si - sj)
-            out[count] = polygon[i] + t * (polygon[j] - polygon[i])
+            out[count] = points[i] + t * (points[j] - points[i])
             if si > 0.0:
                 out_labels[count, 0] = cut_polygon
                 out_labels[count, 1] = cut_edge
@@ -308,66 +300,33 @@ def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
 
 
 @njit(cache=True)
+def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
+    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0 (see _keep_positive)."""
+    side = np.empty(len(polygon))
+    for i in range(len(polygon)):
+        p = polygon[i]
+        side[i] = plane_normal[0] * p[0] + plane_normal[1] * p[1] + plane_normal[2] * p[2] + plane_offset
+    return _keep_positive(polygon, labels, side, cut_polygon, cut_edge)
+
+
+@njit(cache=True)
 def _split(xy, labels, ax, ay, bx, by, cut_polygon, cut_edge, eps):
     """Split a convex counter-clockwise 2-D polygon by the directed line a->b.
 
     Returns (inside_xy, inside_labels, outside_xy, outside_labels): inside is left of a->b. Corners within
     eps of the line count as on it; parts of zero width are returned empty.
     """
-    k = len(xy)
     dx = bx - ax
     dy = by - ay
     length = np.sqrt(dx * dx + dy * dy)
-    side = np.empty(k)
-    for i in range(k):
-        s = (dx * (xy[i, 1] - ay) - dy * (xy[i, 0] - ax)) / length
-        side[i] = 0.0 if abs(s) <= eps else s
-    inside = np.empty((k + 2, 2))
-    inside_labels = np.empty((k + 2, 2), dtype=np.int64)
-    outside = np.empty((k + 2, 2))
-    outside_labels = np.empty((k + 2, 2), dtype=np.int64)
-    n_in = 0
-    n_out = 0
-    for i in range(k):
-        j = (i + 1) % k
-        si = side[i]
-        sj = side[j]
-        if si >= 0.0:
-            inside[n_in] = xy[i]
-            if si == 0.0 and sj < 0.0:
-                inside_labels[n_in, 0] = cut_polygon
-                inside_labels[n_in, 1] = cut_edge
-            else:
-                inside_labels[n_in] = labels[i]
-            n_in += 1
-        if si <= 0.0:
-            outside[n_out] = xy[i]
-            if si == 0.0 and sj > 0.0:
-                outside_labels[n_out, 0] = cut_polygon
-                outside_labels[n_out, 1] = cut_edge
-            else:
-                outside_labels[n_out] = labels[i]
-            n_out += 1
-        if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
-            t = si / (si - sj)
-            cx = xy[i, 0] + t * (xy[j, 0] - xy[i, 0])
-            cy = xy[i, 1] + t * (xy[j, 1] - xy[i, 1])
-            inside[n_in, 0] = cx
-            inside[n_in, 1] = cy
-            outside[n_out, 0] = cx
-            outside[n_out, 1] = cy
-            if si > 0.0:
-                inside_labels[n_in, 0] = cut_polygon
-                inside_labels[n_in, 1] = cut_edge
-                outside_labels[n_out] = labels[i]
-            else:
-                inside_labels[n_in] = labels[i]
-                outside_labels[n_out, 0] = cut_polygon
-                outside_labels[n_out, 1] = cut_edge
-            n_in += 1
-            n_out += 1
-    in_xy, in_labels = _cleanup(inside[:n_in], inside_labels[:n_in], eps)
-    out_xy, out_labels = _cleanup(outside[:n_out], outside_labels[:n_out], eps)
+    side = np.empty(len(xy))
+    for i in range(len(xy)):
+        value = (dx * (xy[i, 1] - ay) - dy * (xy[i, 0] - ax)) / length
+        side[i] = 0.0 if abs(value) <= eps else value
+    inside, inside_labels = _keep_positive(xy, labels, side, cut_polygon, cut_edge)
+    outside, outside_labels = _keep_positive(xy, labels, -side, cut_polygon, cut_edge)
+    in_xy, in_labels = _cleanup(inside, inside_labels, eps)
+    out_xy, out_labels = _cleanup(outside, outside_labels, eps)
     return in_xy, in_labels, out_xy, out_labels
 
 
