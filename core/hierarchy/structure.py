@@ -24,12 +24,20 @@ from .geometry import (
 )
 from .grid import GridSettings, interior_grid_points, side_grid_parameters
 
-# The triangulation works on integers, 1/16 of the length tolerance: points further apart than the
-# tolerance never share a cell, and coordinates stay far below 2**53 (1e9 tolerances across the scene).
-_CDT_UNITS_PER_TOLERANCE = 16.0
+# The triangulation works on integers, 1/1024 of the length tolerance: points further apart than the
+# tolerance never share a cell, needles a few tolerances wide keep their shape, and coordinates stay far
+# below 2**53 (1e12 units across the scene). pythoncdt's own snapping to constraints is off (0.0): the
+# hierarchy snaps to sides itself, and snapping inside needles would break the ring.
+_CDT_UNITS_PER_TOLERANCE = 1024.0
 
 _NO_POINTS = np.zeros((0, 2))
 _NO_IDS = np.zeros(0, dtype=np.int64)
+
+# Inserted points closer than this many length tolerances to a side or a vertex are moved onto it, and
+# shorter segment pieces are dropped: otherwise they make slivers thinner than the tolerance, inside which
+# "is this point on that side" has no consistent answer between neighbours. Segments are still followed
+# to within this distance because their neighbouring pieces split the shared sides.
+_SNAP_TOLERANCES = 16.0
 
 # Point location compares points with all children of an element at once; this bounds that array's size.
 _LOCATE_BATCH = 1 << 20
@@ -195,16 +203,16 @@ class HierarchyCore:
 
     # ------------------------------------------------------------------ matching
 
-    def _side_vertex(self, hedge: int, forward: bool, t_side: float) -> int:
+    def _side_vertex(self, hedge: int, forward: bool, t_side: float, snap_distance: float) -> int:
         """The vertex at parameter t_side along an element side (its HEdge `hedge`, in side order): an
-        existing vertex within the tolerance, or a new one splitting the leaf sub-HEdge there."""
+        existing vertex within snap_distance, or a new one splitting the leaf sub-HEdge there."""
         xy = self._xy.buf
         a = xy[self._he_a[hedge]]
         b = xy[self._he_b[hedge]]
         t = t_side if forward else 1.0 - t_side
         direction = b - a
         length = float(np.hypot(direction[0], direction[1]))
-        snap = self.eps / length
+        snap = snap_distance / length
 
         def param(vertex: int) -> float:
             return float((xy[vertex] - a) @ direction) / (length * length)
@@ -260,6 +268,7 @@ class HierarchyCore:
         it, the grid of spacing `step` (None: no grid) and every point already on its sides.
         Returns False when there was nothing to insert (the element stays a leaf)."""
         eps = self.eps
+        snap = _SNAP_TOLERANCES * eps
         corners, hedges = self._sides(element)
         corners = [int(c) for c in corners]
         hedges = [int(h) for h in hedges]
@@ -276,7 +285,7 @@ class HierarchyCore:
         interior_xy = _NO_POINTS
         if len(features):
             t, distance = side_parameters(features, side_a, side_b)
-            feature_sides = distance <= eps
+            feature_sides = distance <= snap
             inside = cross2(side_vectors, features[:, None, :] - side_a) / side_lengths
             on_boundary = feature_sides.any(axis=1)
             ring_now = [v for s in range(k) for v in self._chain(hedges[s], forward[s])[0]]
@@ -284,13 +293,13 @@ class HierarchyCore:
             for f in np.nonzero(on_boundary)[0]:
                 # Near a sharp corner a point can be within the tolerance of a vertex on another side.
                 gap = np.hypot(*(ring_xy - features[f]).T)
-                if gap.min() <= eps:
+                if gap.min() <= snap:
                     feature_vertex[f] = ring_now[int(np.argmin(gap))]
                     continue
                 s = int(np.argmin(distance[f]))
-                feature_vertex[f] = self._side_vertex(hedges[s], forward[s], float(t[f, s]))
+                feature_vertex[f] = self._side_vertex(hedges[s], forward[s], float(t[f, s]), snap)
             interior = np.nonzero(~on_boundary & (inside.min(axis=1) > 0.0))[0]
-            unique_xy, representative = _merge_close(features[interior], eps)
+            unique_xy, representative = _merge_close(features[interior], snap)
             feature_vertex[interior] = -2 - representative
             interior_xy = unique_xy
 
@@ -311,7 +320,7 @@ class HierarchyCore:
                 chain, _ = self._chain(hedges[s], forward[s])
                 away = np.concatenate([self._xy.buf[chain], feature_xy])
                 for tg in side_grid_parameters(side_a[s], side_b[s], step, away, radius, eps):
-                    self._side_vertex(hedges[s], forward[s], float(tg))
+                    self._side_vertex(hedges[s], forward[s], float(tg), eps)
             grid_xy = interior_grid_points(corner_xy, step, feature_xy, kept_segments, radius, eps)
             if len(grid_xy):
                 interior_xy = np.concatenate([interior_xy, grid_xy])
@@ -339,7 +348,7 @@ class HierarchyCore:
         cdt = pythoncdt.Triangulation(
             pythoncdt.VertexInsertionOrder.AS_PROVIDED,
             pythoncdt.IntersectingConstraintEdges.TRY_RESOLVE,
-            _CDT_UNITS_PER_TOLERANCE,
+            0.0,
         )
         cdt_xy = np.concatenate([self._xy.buf[ring], interior_xy])
         origin = corner_xy[0]
@@ -469,7 +478,8 @@ class HierarchyCore:
             kids = np.arange(first, first + int(self._e_child_count.buf[element]))
             t_in, t_out = clip_segment_to_polygon(self._element_corners_xy(kids), a, b)
             length = float(np.linalg.norm(b - a))
-            for i in np.nonzero((t_out - t_in) * length > self.eps)[0]:
+            shortest = _SNAP_TOLERANCES * self.eps
+            for i in np.nonzero((t_out - t_in) * length > shortest)[0]:
                 stack.append((int(kids[i]), a + t_in[i] * (b - a), a + t_out[i] * (b - a)))
 
     def _queue_item(self, element: int, kind: int, item) -> None:
