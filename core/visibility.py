@@ -371,43 +371,37 @@ def _cleanup(xy, labels, eps):
 
 
 @njit(cache=True)
+def _side_range(polygon, edge_owner, e):
+    """Highest and lowest signed distance of `polygon`'s corners (K, 2) to the line of edge e of `edge_owner`."""
+    ax = edge_owner[e, 0]
+    ay = edge_owner[e, 1]
+    dx = edge_owner[(e + 1) % len(edge_owner), 0] - ax
+    dy = edge_owner[(e + 1) % len(edge_owner), 1] - ay
+    length = np.sqrt(dx * dx + dy * dy)
+    highest = -np.inf
+    lowest = np.inf
+    for i in range(len(polygon)):
+        s = (dx * (polygon[i, 1] - ay) - dy * (polygon[i, 0] - ax)) / length
+        highest = max(highest, s)
+        lowest = min(lowest, s)
+    return highest, lowest
+
+
+@njit(cache=True)
 def _relation(piece, blocker, eps):
     """0: disjoint (a separating edge line exists), 1: piece inside blocker, 2: they overlap."""
     inside_all = True
     for e in range(len(blocker)):
-        ax = blocker[e, 0]
-        ay = blocker[e, 1]
-        bx = blocker[(e + 1) % len(blocker), 0]
-        by = blocker[(e + 1) % len(blocker), 1]
-        dx = bx - ax
-        dy = by - ay
-        length = np.sqrt(dx * dx + dy * dy)
-        all_out = True
-        for i in range(len(piece)):
-            s = (dx * (piece[i, 1] - ay) - dy * (piece[i, 0] - ax)) / length
-            if s > eps:
-                all_out = False
-            if s < -eps:
-                inside_all = False
-        if all_out:
+        highest, lowest = _side_range(piece, blocker, e)
+        if highest <= eps:
             return 0
+        if lowest < -eps:
+            inside_all = False
     if inside_all:
         return 1
     for e in range(len(piece)):
-        ax = piece[e, 0]
-        ay = piece[e, 1]
-        bx = piece[(e + 1) % len(piece), 0]
-        by = piece[(e + 1) % len(piece), 1]
-        dx = bx - ax
-        dy = by - ay
-        length = np.sqrt(dx * dx + dy * dy)
-        all_out = True
-        for i in range(len(blocker)):
-            s = (dx * (blocker[i, 1] - ay) - dy * (blocker[i, 0] - ax)) / length
-            if s > eps:
-                all_out = False
-                break
-        if all_out:
+        highest, _ = _side_range(blocker, piece, e)
+        if highest <= eps:
             return 0
     return 2
 
