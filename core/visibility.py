@@ -471,11 +471,7 @@ def _point_view(
     sign = 1.0 if height > 0.0 else -1.0
     height = abs(height)
 
-    k = len(source_polygon)
-    labels = np.empty((k, 2), dtype=np.int64)
-    for j in range(k):
-        labels[j, 0] = source
-        labels[j, 1] = j
+    labels = _own_edges(source, len(source_polygon))
     plane_n = normal.copy()
     plane_c = -(normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2])
     visible3, side_labels = _clip3(source_polygon, labels, plane_n, plane_c, HORIZON, 0)
@@ -485,8 +481,7 @@ def _point_view(
     xy = np.empty((len(visible3), 2))
     for j in range(len(visible3)):
         d = visible3[j] - origin
-        xy[j, 0] = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / radius
-        xy[j, 1] = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / radius
+        _to_frame(d, u, v, radius, xy[j])
     xy, visible_labels = _orient_ccw(xy, side_labels)
     xy, visible_labels = _cleanup(xy, visible_labels, eps2)
     if len(xy) == 0:
@@ -575,6 +570,23 @@ def _point_view(
 
 
 @njit(cache=True)
+def _own_edges(polygon, count):
+    """Generator labels (count, 2) int64 of a polygon's own edges: (polygon, local edge)."""
+    labels = np.empty((count, 2), dtype=np.int64)
+    for j in range(count):
+        labels[j, 0] = polygon
+        labels[j, 1] = j
+    return labels
+
+
+@njit(cache=True)
+def _to_frame(offset, u, v, radius, out):
+    """Write the 2-D frame coordinates of a 3-D offset from the frame's origin into out (2,)."""
+    out[0] = (offset[0] * u[0] + offset[1] * u[1] + offset[2] * u[2]) / radius
+    out[1] = (offset[0] * v[0] + offset[1] * v[1] + offset[2] * v[2]) / radius
+
+
+@njit(cache=True)
 def _covers(blocker, source, areas):
     """Contact rule for two coplanar polygons that overlap: the smaller one lies on the larger one.
 
@@ -588,15 +600,10 @@ def _covers(blocker, source, areas):
 @njit(cache=True)
 def _footprint(polygon, blocker, origin, u, v, radius, eps2):
     """A polygon lying in the source's plane, in the source's 2-D frame, counter-clockwise, with generators."""
-    k = len(polygon)
-    xy = np.empty((k, 2))
-    labels = np.empty((k, 2), dtype=np.int64)
-    for j in range(k):
-        d = polygon[j] - origin
-        xy[j, 0] = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / radius
-        xy[j, 1] = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / radius
-        labels[j, 0] = blocker
-        labels[j, 1] = j
+    xy = np.empty((len(polygon), 2))
+    for j in range(len(polygon)):
+        _to_frame(polygon[j] - origin, u, v, radius, xy[j])
+    labels = _own_edges(blocker, len(polygon))
     xy, labels = _orient_ccw(xy, labels)
     return _cleanup(xy, labels, eps2)
 
@@ -642,11 +649,7 @@ def _project_blocker(
     Returns the projection as a counter-clockwise (K, 2) polygon in the source frame with its generators, or
     empty arrays when nothing of the blocker is inside the pyramid.
     """
-    k = len(polygon)
-    labels = np.empty((k, 2), dtype=np.int64)
-    for j in range(k):
-        labels[j, 0] = blocker
-        labels[j, 1] = j
+    labels = _own_edges(blocker, len(polygon))
     clipped = polygon.copy()
     for j in range(len(side_normals)):
         clipped, labels = _clip3(clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0],
@@ -664,8 +667,7 @@ def _project_blocker(
             return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
         t = height / depth
         d = point + t * w - origin
-        xy[j, 0] = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / radius
-        xy[j, 1] = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / radius
+        _to_frame(d, u, v, radius, xy[j])
     xy, labels = _orient_ccw(xy, labels)
     return _cleanup(xy, labels, eps2)
 
