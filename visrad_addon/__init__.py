@@ -1,12 +1,22 @@
-"""VisRad Blender layer: converts Blender scenes to core.Scene and writes results back (issue 6).
+"""VisRad Blender layer: Blender scene -> core.Scene, results -> result meshes and curves, operators and UI.
 
-Nothing is registered yet; the engine in core/ is usable on its own.
+The numba cache is configured before anything imports core's kernels (see numba_cache.py).
 """
+
+from . import numba_cache
+
+numba_cache.configure(__package__.rpartition(".")[0])
+
+from . import operators, properties, session, ui  # noqa: E402
+
+_modules = (properties, session, operators, ui)
 
 
 def register():
-    pass
+    for module in _modules:
+        module.register()
 
 
 def unregister():
-    pass
+    for module in reversed(_modules):
+        module.unregister()
