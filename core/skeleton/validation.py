@@ -1,0 +1,954 @@
+"""Node validation and arc derivation: ray cast each candidate line, keep the extremal stabbing lines, and
+derive every adjacent arc (critical line swath) with its generators, end faces and orientation.
+
+Durand et al. 1997, sections 3.2-3.3 and appendix 7.2. A candidate line is cast through the whole scene; it
+is a node when its generators are touched in one free segment of the line (the inner ones tangent, the
+outer ones tangent or terminal: a line may stop on a vertex or edge, as a line leaving a floor corner does).
+
+The paper deduces a node's arcs from a catalogue, with a table of start/end criteria per node type (its
+Table 2). Here the same information comes from one first-order computation valid for every node type:
+relaxing one generator constraint leaves a one-parameter family of lines; its tangent at the node is an
+affine displacement field Delta(tau) = alpha + tau beta perpendicular to the line (tau: position along it),
+fixed by the retained constraints (Delta = 0 at a kept vertex, Delta parallel to a kept edge at its contact)
+and a normalisation (the contact slides one unit along the arc's parameter edge). For each direction of that
+motion the contacts along the line are classified to first order: a face is hit when the displaced line
+crosses its plane inside it; a retained generator stays tangent or becomes terminal according to the faces
+around it seen along the tilted direction. This yields the arc's validity (nothing hit between its
+generators), its end faces (the first face crossed beyond each outer generator) and whether the node starts
+or ends it along its parameter edge — exactly the catalogue adjacencies and the start/end criteria.
+
+Arcs are keyed by their generators in line order and their two end faces (face groups, see
+`core.skeleton.topology`); END_TERMINAL marks an outer generator the lines stop on, END_FREE lines that leave
+the scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..raycast import (
+    CONTACT_EDGE,
+    CONTACT_INTERIOR,
+    CONTACT_SLIDING,
+    CONTACT_VERTEX,
+    _arcs_cover_circle,
+    _contact_arc,
+    _gather_contacts,
+    _perpendicular_frame,
+    _sort_contacts,
+)
+from ..bvh import STACK_SIZE
+
+NODE_VV = 0
+NODE_VEE = 1
+NODE_EVE = 2
+NODE_E4 = 3
+NODE_NAMES = {NODE_VV: "VV", NODE_VEE: "VEE", NODE_EVE: "EVE", NODE_E4: "E4"}
+
+ARC_EV = 0
+ARC_EEE = 1
+ARC_NAMES = {ARC_EV: "EV", ARC_EEE: "EEE"}
+
+GEN_NONE = 0
+GEN_VERTEX = 1
+GEN_EDGE = 2
+
+END_TERMINAL = -1
+END_FREE = -2
+
+REJECT_MISSING = 0
+REJECT_COINCIDENT = 1
+REJECT_BLOCKED = 2
+REJECT_DEGENERATE = 3
+REJECT_NAMES = ("missing generator", "coincident generators", "blocked", "accidental contact")
+
+N_COUNTERS = 4
+
+_TILT = 1e-6
+"""Angle (radians) by which a line is tilted to read the tangent/terminal state of its generators just off a
+node; far above tol.cosine and far below any angle between two faces of a sane scene."""
+
+_SIDE_EPS = 1e-9
+"""Relative margin of the first-order side tests; ambiguous cases count as hits (never a false free line)."""
+
+
+@njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _cross(a, b):
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@njit(cache=True)
+def _clip_line(origin, direction, lo, hi):
+    """Parameter range (t0, t1) of origin + t direction inside the box [lo, hi]; t0 > t1 when it misses."""
+    t0 = -np.inf
+    t1 = np.inf
+    for k in range(3):
+        if direction[k] == 0.0:
+            if origin[k] < lo[k] or origin[k] > hi[k]:
+                return 1.0, 0.0
+        else:
+            a = (lo[k] - origin[k]) / direction[k]
+            b = (hi[k] - origin[k]) / direction[k]
+            if a > b:
+                a, b = b, a
+            t0 = max(t0, a)
+            t1 = min(t1, b)
+    return t0, t1
+
+
+@njit(cache=True)
+def _group_blocked(points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len):
+    """Whether contacts at one point close around a line of the given direction (it cannot pass there)."""
+    members = 0
+    e1, e2 = _perpendicular_frame(direction)
+    for i in range(count):
+        if kinds[i] == CONTACT_INTERIOR:
+            return True
+        if kinds[i] == CONTACT_EDGE or kinds[i] == CONTACT_VERTEX:
+            arc_start[members], arc_len[members] = _contact_arc(
+                points, offsets, normals, polys[i], kinds[i], locals_[i], e1, e2
+            )
+            members += 1
+    if members < 2:
+        return False
+    return _arcs_cover_circle(arc_start, arc_len, members, angle_tol)
+
+
+@njit(cache=True)
+def _displaced_hit(points, offsets, normals, poly, kind, local, delta, u, angle_tol):
+    """First-order test: does the line displaced by `delta` (3,) (perpendicular to u) cross the polygon at the
+    contact? Returns (hit, shift) where shift is how far along u the crossing moves (to order contacts)."""
+    n = normals[poly]
+    nu = _dot(n, u)
+    if abs(nu) <= angle_tol:
+        return True, 0.0
+    nd = _dot(n, delta)
+    shift = -nd / nu
+    if kind == CONTACT_INTERIOR:
+        return True, shift
+    q = delta + shift * u
+    q_len = np.sqrt(_dot(q, q))
+    if q_len == 0.0:
+        return True, shift
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    if kind == CONTACT_EDGE:
+        a = points[first + local]
+        b = points[first + (local + 1) % count]
+        m = _cross(n, b - a)
+        return _dot(q, m) > -_SIDE_EPS * q_len * np.sqrt(_dot(m, m)), shift
+    if kind == CONTACT_VERTEX:
+        prev = points[first + (local - 1) % count]
+        corner = points[first + local]
+        nxt = points[first + (local + 1) % count]
+        m1 = _cross(n, corner - prev)
+        m2 = _cross(n, nxt - corner)
+        inside1 = _dot(q, m1) > -_SIDE_EPS * q_len * np.sqrt(_dot(m1, m1))
+        inside2 = _dot(q, m2) > -_SIDE_EPS * q_len * np.sqrt(_dot(m2, m2))
+        return inside1 and inside2, shift
+    return True, shift
+
+
+@njit(cache=True)
+def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
+    """(tau_in, tau_out): where the line start + tau u (tau in [0, length]), lying in the polygon's plane,
+    overlaps the polygon; tau_in > tau_out when it does not."""
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = normals[poly]
+    lo = 0.0
+    hi = length
+    for k in range(count):
+        a = points[first + k]
+        b = points[first + (k + 1) % count]
+        outward = _cross(b - a, normal)
+        outward /= np.sqrt(_dot(outward, outward))
+        offset = _dot(start - a, outward)
+        rate = _dot(u, outward)
+        if rate == 0.0:
+            if offset > tol:
+                return 1.0, 0.0
+        elif rate > 0.0:
+            hi = min(hi, (tol - offset) / rate)
+        else:
+            lo = max(lo, (tol - offset) / rate)
+    return lo, hi
+
+
+@njit(cache=True)
+def _solve4(m, rhs):
+    """Solve the 4x4 system m x = rhs by Gaussian elimination with partial pivoting; (ok, x)."""
+    a = m.copy()
+    b = rhs.copy()
+    scale = np.max(np.abs(a))
+    if scale == 0.0:
+        return False, b
+    for col in range(4):
+        pivot = col
+        for row in range(col + 1, 4):
+            if abs(a[row, col]) > abs(a[pivot, col]):
+                pivot = row
+        if abs(a[pivot, col]) <= 1e-12 * scale:
+            return False, b
+        if pivot != col:
+            for k in range(4):
+                a[col, k], a[pivot, k] = a[pivot, k], a[col, k]
+            b[col], b[pivot] = b[pivot], b[col]
+        for row in range(col + 1, 4):
+            factor = a[row, col] / a[col, col]
+            for k in range(col, 4):
+                a[row, k] -= factor * a[col, k]
+            b[row] -= factor * b[col]
+    x = np.empty(4)
+    for row in range(3, -1, -1):
+        total = b[row]
+        for k in range(row + 1, 4):
+            total -= a[row, k] * x[k]
+        x[row] = total / a[row, row]
+    return True, x
+
+
+@njit(cache=True)
+def _edge_direction(vertices, edges, e, away_from):
+    """Unit direction (3,) of edge e, from its first vertex, or away from vertex `away_from` if >= 0."""
+    a = vertices[edges[e, 0]]
+    b = vertices[edges[e, 1]]
+    d = b - a
+    if away_from >= 0 and edges[e, 1] == away_from:
+        d = a - b
+    return d / np.sqrt(_dot(d, d))
+
+
+@njit(cache=True)
+def _is_incident_face(poly, kind, gid, vf_off, vf_face, ef_off, ef_face):
+    if kind == GEN_VERTEX:
+        for i in range(vf_off[gid], vf_off[gid + 1]):
+            if vf_face[i] == poly:
+                return True
+        return False
+    for i in range(ef_off[gid], ef_off[gid + 1]):
+        if ef_face[i] == poly:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _generator_blocked(
+    points, offsets, normals, kind, gid, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+    direction, angle_tol, polys, kinds, locals_, arc_start, arc_len,
+):  # fmt: skip
+    """Whether the faces around generator (kind, gid) close around a line of this direction through it."""
+    count = 0
+    if kind == GEN_VERTEX:
+        for i in range(vf_off[gid], vf_off[gid + 1]):
+            polys[count] = vf_face[i]
+            kinds[count] = CONTACT_VERTEX
+            locals_[count] = vf_corner[i]
+            count += 1
+    else:
+        for i in range(ef_off[gid], ef_off[gid + 1]):
+            polys[count] = ef_face[i]
+            kinds[count] = CONTACT_EDGE
+            locals_[count] = ef_local[i]
+            count += 1
+    return _group_blocked(points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len)
+
+
+@njit(cache=True)
+def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo, hi, delta, u, angle_tol, outward):
+    """Among contacts lo..hi-1 (one point), the polygon the displaced line crosses first going `outward`
+    (+1 along u, -1 against); -1 when it crosses none. Ties (one plane): the smaller polygon covers."""
+    best = -1
+    best_shift = 0.0
+    for i in range(lo, hi):
+        hit, shift = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)
+        if not hit:
+            continue
+        key = shift * outward
+        if best < 0 or key < best_shift or (key == best_shift and (areas[c_poly[i]] < areas[best] or (
+                areas[c_poly[i]] == areas[best] and c_poly[i] < best))):
+            best = c_poly[i]
+            best_shift = key
+    return best
+
+
+@njit(cache=True)
+def _near_plane(point, normal, offset, tol):
+    return abs(_dot(normal, point) + offset) <= tol
+
+
+@njit(cache=True)
+def _coplanar_swath(vertices, edges, normals, plane_offsets, vf_off, vf_face, ef_off, ef_face, r_kind, r_id, n, tol):
+    """Whether the arc's lines all lie in one plane with a face of a generator, or its three edges share a
+    plane: such swaths slide in a face plane (face events, section 2.3) or are the coplanar edge triples the
+    paper rejects; they are not EV / EEE arcs."""
+    for j in range(n):
+        if r_kind[j] == GEN_VERTEX:
+            v = r_id[j]
+            for i in range(vf_off[v], vf_off[v + 1]):
+                f = vf_face[i]
+                inside = True
+                for k in range(n):
+                    if r_kind[k] == GEN_EDGE:
+                        for end in range(2):
+                            if not _near_plane(vertices[edges[r_id[k], end]], normals[f], plane_offsets[f], tol):
+                                inside = False
+                if inside:
+                    return True
+        else:
+            e = r_id[j]
+            for i in range(ef_off[e], ef_off[e + 1]):
+                f = ef_face[i]
+                inside = True
+                for k in range(n):
+                    if k == j:
+                        continue
+                    if r_kind[k] == GEN_VERTEX:
+                        if not _near_plane(vertices[r_id[k]], normals[f], plane_offsets[f], tol):
+                            inside = False
+                    else:
+                        for end in range(2):
+                            if not _near_plane(vertices[edges[r_id[k], end]], normals[f], plane_offsets[f], tol):
+                                inside = False
+                if inside:
+                    return True
+    if n == 3 and r_kind[0] == GEN_EDGE and r_kind[1] == GEN_EDGE and r_kind[2] == GEN_EDGE:
+        a = vertices[edges[r_id[0], 0]]
+        normal = _cross(vertices[edges[r_id[0], 1]] - a, vertices[edges[r_id[1], 0]] - a)
+        length = np.sqrt(_dot(normal, normal))
+        if length == 0.0:
+            normal = _cross(vertices[edges[r_id[0], 1]] - a, vertices[edges[r_id[1], 1]] - a)
+            length = np.sqrt(_dot(normal, normal))
+        if length > 0.0:
+            normal /= length
+            offset = -_dot(normal, a)
+            for k in range(3):
+                for end in range(2):
+                    if not _near_plane(vertices[edges[r_id[k], end]], normal, offset, tol):
+                        return False
+            return True
+    return False
+
+
+@njit(cache=True)
+def _relaxed_arc(
+    points, offsets, normals, areas, vertices, edges, n_vertices,
+    vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
+    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol, plane_offsets,
+    r_kind, r_id, r_group, n_retained, norm_index, norm_dir, sigma,
+    sl_poly, sl_a, sl_b, n_sliding,
+    polys, kinds, locals_, arc_start, arc_len, codes,
+):  # fmt: skip
+    """One arc adjacent to a node: the retained generators r_* (n_retained of them, in any order), the
+    motion normalised by sliding retained edge `norm_index` by sigma * norm_dir. Fills codes (3,) with the
+    generators in canonical line order; returns (ok, arc kind, end before, end after, s, direction) where s is
+    the node's coordinate on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
+    vertex) and direction +1 when the arc extends towards larger s."""
+    f1, f2 = _perpendicular_frame(u)
+    m = np.zeros((4, 4))
+    rhs = np.zeros(4)
+    row = 0
+    for j in range(n_retained):
+        tn = g_tau[r_group[j]] / diag
+        if r_kind[j] == GEN_VERTEX:
+            m[row, 0] = 1.0
+            m[row, 2] = tn
+            m[row + 1, 1] = 1.0
+            m[row + 1, 3] = tn
+            row += 2
+        elif j == norm_index:
+            w1 = _dot(norm_dir, f1)
+            w2 = _dot(norm_dir, f2)
+            m[row, 0] = 1.0
+            m[row, 2] = tn
+            rhs[row] = sigma * w1
+            m[row + 1, 1] = 1.0
+            m[row + 1, 3] = tn
+            rhs[row + 1] = sigma * w2
+            row += 2
+        else:
+            d = _edge_direction(vertices, edges, r_id[j], -1)
+            w1 = _dot(d, f1)
+            w2 = _dot(d, f2)
+            m[row, 0] = -w2
+            m[row, 1] = w1
+            m[row, 2] = -w2 * tn
+            m[row, 3] = w1 * tn
+            row += 1
+    if row != 4 or _coplanar_swath(
+        vertices, edges, normals, plane_offsets, vf_off, vf_face, ef_off, ef_face, r_kind, r_id, n_retained, tol
+    ):
+        return False, 0, 0, 0, 0.0, 0
+    ok, x = _solve4(m, rhs)
+    if not ok:
+        return False, 0, 0, 0, 0.0, 0
+    beta = x[2] * f1 + x[3] * f2
+    beta_len = np.sqrt(_dot(beta, beta))
+    tilted = u.copy()
+    if beta_len > 1e-12:
+        tilted = u + (_TILT / beta_len) * beta
+        tilted /= np.sqrt(_dot(tilted, tilted))
+
+    first = n_groups
+    last = -1
+    for j in range(n_retained):
+        first = min(first, r_group[j])
+        last = max(last, r_group[j])
+
+    # a face whose plane held the line is crossed where the displacement leaves its plane, if inside it
+    before_tau = -np.inf
+    before_poly = -1
+    after_tau = np.inf
+    after_poly = -1
+    for k in range(n_sliding):
+        n = normals[sl_poly[k]]
+        rate = x[2] * _dot(n, f1) + x[3] * _dot(n, f2)
+        offset = x[0] * _dot(n, f1) + x[1] * _dot(n, f2)
+        if abs(rate) <= 1e-12:
+            if abs(offset) <= 1e-12:
+                return False, 0, 0, 0, 0.0, 0
+            continue
+        crossing = -offset / rate * diag
+        if crossing < sl_a[k] - tol or crossing > sl_b[k] + tol:
+            continue
+        handled = False
+        for j in range(n_retained):
+            if abs(g_tau[r_group[j]] - crossing) <= tol and _is_incident_face(
+                sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face
+            ):
+                handled = True
+        if handled:
+            continue
+        if g_tau[first] + tol < crossing < g_tau[last] - tol:
+            return False, 0, 0, 0, 0.0, 0
+        if crossing <= g_tau[first] + tol and crossing > before_tau:
+            before_tau = crossing
+            before_poly = sl_poly[k]
+        if crossing >= g_tau[last] - tol and crossing < after_tau:
+            after_tau = crossing
+            after_poly = sl_poly[k]
+
+    blocked_first = False
+    blocked_last = False
+    for g in range(first, last + 1):
+        tn = g_tau[g] / diag
+        delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
+        j = -1
+        for k in range(n_retained):
+            if r_group[k] == g:
+                j = k
+        blocked = False
+        if j >= 0 and r_kind[j] == GEN_VERTEX:
+            count = 0
+            for i in range(g_lo[g], g_hi[g]):
+                if not _is_incident_face(c_poly[i], GEN_VERTEX, r_id[j], vf_off, vf_face, ef_off, ef_face):
+                    polys[count] = c_poly[i]
+                    kinds[count] = c_kind[i]
+                    locals_[count] = c_local[i]
+                    count += 1
+            for i in range(vf_off[r_id[j]], vf_off[r_id[j] + 1]):
+                polys[count] = vf_face[i]
+                kinds[count] = CONTACT_VERTEX
+                locals_[count] = vf_corner[i]
+                count += 1
+            blocked = _group_blocked(
+                points, offsets, normals, polys, kinds, locals_, count, tilted, angle_tol, arc_start, arc_len
+            )
+        elif j >= 0:
+            # the contact slides along the kept edge, so its position on the line moves too: a face met at
+            # the same point is in front of the edge (the arc does not exist) or behind it (the line stops)
+            blocked = _generator_blocked(
+                points, offsets, normals, GEN_EDGE, r_id[j], vf_off, vf_face, vf_corner, ef_off, ef_face,
+                ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len,
+            )  # fmt: skip
+            d = _edge_direction(vertices, edges, r_id[j], -1)
+            w1 = _dot(d, f1)
+            w2 = _dot(d, f2)
+            slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
+            generator_shift = slide * _dot(d, u)
+            for i in range(g_lo[g], g_hi[g]):
+                if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
+                    continue
+                hit, shift = _displaced_hit(
+                    points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol
+                )
+                if not hit:
+                    continue
+                if g != first and g != last:
+                    return False, 0, 0, 0, 0.0, 0
+                ahead = shift - generator_shift if g == first else generator_shift - shift
+                if ahead > 1e-12:
+                    return False, 0, 0, 0, 0.0, 0
+                blocked = True
+        else:
+            for i in range(g_lo[g], g_hi[g]):
+                hit, _ = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)
+                if hit:
+                    blocked = True
+                    break
+        if g == first:
+            blocked_first = blocked
+        elif g == last:
+            blocked_last = blocked
+        elif blocked:
+            return False, 0, 0, 0, 0.0, 0
+
+    end_before = END_FREE
+    if blocked_first:
+        end_before = END_TERMINAL
+    else:
+        for g in range(first - 1, -1, -1):
+            if g_tau[g] < before_tau:
+                break
+            tn = g_tau[g] / diag
+            delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
+            poly = _first_crossing(
+                points, offsets, normals, areas, c_poly, c_kind, c_local, g_lo[g], g_hi[g], delta, u, angle_tol, -1.0
+            )
+            if poly >= 0:
+                end_before = face_group[poly]
+                break
+        if end_before == END_FREE and before_poly >= 0:
+            end_before = face_group[before_poly]
+    end_after = END_FREE
+    if blocked_last:
+        end_after = END_TERMINAL
+    else:
+        for g in range(last + 1, n_groups):
+            if g_tau[g] > after_tau:
+                break
+            tn = g_tau[g] / diag
+            delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
+            poly = _first_crossing(
+                points, offsets, normals, areas, c_poly, c_kind, c_local, g_lo[g], g_hi[g], delta, u, angle_tol, 1.0
+            )
+            if poly >= 0:
+                end_after = face_group[poly]
+                break
+        if end_after == END_FREE and after_poly >= 0:
+            end_after = face_group[after_poly]
+
+    param = -1
+    has_vertex = False
+    for j in range(n_retained):
+        if r_kind[j] == GEN_EDGE and (param < 0 or r_id[j] < r_id[param]):
+            param = j
+        if r_kind[j] == GEN_VERTEX:
+            has_vertex = True
+    e = r_id[param]
+    a = vertices[edges[e, 0]]
+    b = vertices[edges[e, 1]]
+    along = b - a
+    contact = start + g_tau[r_group[param]] * u
+    s = _dot(contact - a, along) / _dot(along, along)
+    tn = g_tau[r_group[param]] / diag
+    d = along / np.sqrt(_dot(along, along))
+    rate = (x[0] + tn * x[2]) * _dot(d, f1) + (x[1] + tn * x[3]) * _dot(d, f2)
+    if abs(rate) <= 1e-12:
+        return False, 0, 0, 0, 0.0, 0
+    direction = 1 if rate > 0.0 else -1
+
+    # generators in line order, then the canonical orientation: lower code first
+    order = np.argsort(g_tau[r_group[:n_retained]])
+    for k in range(3):
+        codes[k] = -1
+    for k in range(n_retained):
+        j = order[k]
+        codes[k] = r_id[j] if r_kind[j] == GEN_VERTEX else n_vertices + r_id[j]
+    if codes[0] > codes[n_retained - 1]:
+        for k in range(n_retained // 2):
+            codes[k], codes[n_retained - 1 - k] = codes[n_retained - 1 - k], codes[k]
+        end_before, end_after = end_after, end_before
+    kind = ARC_EV if has_vertex else ARC_EEE
+    return True, kind, end_before, end_after, s, direction
+
+
+@njit(cache=True)
+def _validate_chunk(
+    points, offsets, normals, plane_offsets, corner_vertex, corner_edge, areas,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
+    vertices, edges, vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_local, face_group,
+    edge_mask, cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction,
+    lo, hi, diag, tol, angle_tol,
+):  # fmt: skip
+    n_cand = cand_kind.shape[0]
+    n_vertices = vertices.shape[0]
+    bound = 0
+    for c in range(n_cand):
+        for k in range(2):
+            v = cand_vertices[c, k]
+            if v >= 0:
+                bound += ve_off[v + 1] - ve_off[v]
+        for k in range(4):
+            if cand_edges[c, k] >= 0:
+                bound += 2
+    node_cand = np.empty(n_cand, dtype=np.int64)
+    node_kind = np.empty(n_cand, dtype=np.int8)
+    node_gkind = np.zeros((n_cand, 4), dtype=np.int8)
+    node_gid = np.full((n_cand, 4), -1, dtype=np.int64)
+    node_start = np.empty((n_cand, 3))
+    node_dir = np.empty((n_cand, 3))
+    node_tau = np.zeros((n_cand, 4))
+    node_end = np.empty((n_cand, 2), dtype=np.int64)
+    inc_node = np.empty(bound, dtype=np.int64)
+    inc_kind = np.empty(bound, dtype=np.int8)
+    inc_codes = np.empty((bound, 3), dtype=np.int64)
+    inc_end = np.empty((bound, 2), dtype=np.int64)
+    inc_s = np.empty(bound)
+    inc_dir = np.empty(bound, dtype=np.int8)
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+
+    capacity = 256
+    c_poly = np.empty(capacity, dtype=np.int64)
+    c_t = np.empty(capacity)
+    c_kind = np.empty(capacity, dtype=np.int8)
+    c_local = np.empty(capacity, dtype=np.int64)
+    stack = np.empty(STACK_SIZE, dtype=np.int64)
+    g_lo = np.empty(capacity, dtype=np.int64)
+    g_hi = np.empty(capacity, dtype=np.int64)
+    g_tau = np.empty(capacity)
+    sl_poly = np.empty(capacity, dtype=np.int64)
+    sl_a = np.empty(capacity)
+    sl_b = np.empty(capacity)
+    max_faces = 0
+    for v in range(n_vertices):
+        max_faces = max(max_faces, vf_off[v + 1] - vf_off[v])
+    scratch = capacity + max_faces
+    polys = np.empty(scratch, dtype=np.int64)
+    kinds = np.empty(scratch, dtype=np.int8)
+    locals_ = np.empty(scratch, dtype=np.int64)
+    arc_start = np.empty(scratch)
+    arc_len = np.empty(scratch)
+    gk = np.zeros(4, dtype=np.int8)
+    gid = np.zeros(4, dtype=np.int64)
+    gg = np.zeros(4, dtype=np.int64)
+    r_kind = np.zeros(3, dtype=np.int8)
+    r_id = np.zeros(3, dtype=np.int64)
+    r_group = np.zeros(3, dtype=np.int64)
+    codes = np.zeros(3, dtype=np.int64)
+
+    n_nodes = 0
+    n_inc = 0
+    for c in range(n_cand):
+        ng = 0
+        for k in range(2):
+            if cand_vertices[c, k] >= 0:
+                gk[ng] = GEN_VERTEX
+                gid[ng] = cand_vertices[c, k]
+                ng += 1
+        for k in range(4):
+            if cand_edges[c, k] >= 0:
+                gk[ng] = GEN_EDGE
+                gid[ng] = cand_edges[c, k]
+                ng += 1
+        u = cand_direction[c] / np.sqrt(_dot(cand_direction[c], cand_direction[c]))
+        t0, t1 = _clip_line(cand_origin[c], u, lo, hi)
+        if not t0 < t1:
+            counters[REJECT_MISSING] += 1
+            continue
+        start = cand_origin[c] + t0 * u
+        end = cand_origin[c] + t1 * u
+        length = t1 - t0
+        found = _gather_contacts(
+            points, offsets, normals, plane_offsets,
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
+            start, end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
+        )  # fmt: skip
+        if found > capacity:
+            capacity = 2 * found
+            c_poly = np.empty(capacity, dtype=np.int64)
+            c_t = np.empty(capacity)
+            c_kind = np.empty(capacity, dtype=np.int8)
+            c_local = np.empty(capacity, dtype=np.int64)
+            g_lo = np.empty(capacity, dtype=np.int64)
+            g_hi = np.empty(capacity, dtype=np.int64)
+            g_tau = np.empty(capacity)
+            sl_poly = np.empty(capacity, dtype=np.int64)
+            sl_a = np.empty(capacity)
+            sl_b = np.empty(capacity)
+            polys = np.empty(capacity + max_faces, dtype=np.int64)
+            kinds = np.empty(capacity + max_faces, dtype=np.int8)
+            locals_ = np.empty(capacity + max_faces, dtype=np.int64)
+            arc_start = np.empty(capacity + max_faces)
+            arc_len = np.empty(capacity + max_faces)
+            found = _gather_contacts(
+                points, offsets, normals, plane_offsets,
+                node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
+                start, end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
+            )  # fmt: skip
+        _sort_contacts(c_poly, c_t, c_kind, c_local, found, tol / length)
+        # lines lying in a face plane slide over it: an interval, not a point; kept apart from the point groups
+        n_sliding = 0
+        kept = 0
+        for i in range(found):
+            if c_kind[i] == CONTACT_SLIDING:
+                tau_in, tau_out = _sliding_interval(points, offsets, normals, c_poly[i], start, u, length, tol)
+                if tau_in <= tau_out:
+                    sl_poly[n_sliding] = c_poly[i]
+                    sl_a[n_sliding] = tau_in
+                    sl_b[n_sliding] = tau_out
+                    n_sliding += 1
+                continue
+            c_poly[kept] = c_poly[i]
+            c_t[kept] = c_t[i]
+            c_kind[kept] = c_kind[i]
+            c_local[kept] = c_local[i]
+            kept += 1
+        found = kept
+        n_groups = 0
+        for i in range(found):
+            tau = c_t[i] * length
+            if n_groups == 0 or tau - c_t[i - 1] * length > tol:
+                g_lo[n_groups] = i
+                g_tau[n_groups] = tau
+                n_groups += 1
+            g_hi[n_groups - 1] = i + 1
+
+        missing = False
+        for j in range(ng):
+            gg[j] = -1
+            for g in range(n_groups):
+                for i in range(g_lo[g], g_hi[g]):
+                    base = offsets[c_poly[i]] + c_local[i]
+                    if gk[j] == GEN_VERTEX and c_kind[i] == CONTACT_VERTEX and corner_vertex[base] == gid[j]:
+                        gg[j] = g
+                    elif gk[j] == GEN_EDGE and c_kind[i] == CONTACT_EDGE and corner_edge[base] == gid[j]:
+                        gg[j] = g
+            if gg[j] < 0:
+                missing = True
+        if missing:
+            counters[REJECT_MISSING] += 1
+            continue
+        coincident = False
+        for j in range(ng):
+            for k in range(j + 1, ng):
+                if gg[j] == gg[k]:
+                    coincident = True
+        if coincident:
+            counters[REJECT_COINCIDENT] += 1
+            continue
+        # generators in line order
+        for j in range(1, ng):
+            k = j
+            while k > 0 and gg[k - 1] > gg[k]:
+                gg[k - 1], gg[k] = gg[k], gg[k - 1]
+                gk[k - 1], gk[k] = gk[k], gk[k - 1]
+                gid[k - 1], gid[k] = gid[k], gid[k - 1]
+                k -= 1
+        first = gg[0]
+        last = gg[ng - 1]
+        status = 0
+        for g in range(first + 1, last):
+            is_generator = False
+            for j in range(ng):
+                if gg[j] == g:
+                    is_generator = True
+            count = g_hi[g] - g_lo[g]
+            if is_generator:
+                if _group_blocked(
+                    points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
+                    angle_tol, arc_start, arc_len,
+                ):  # fmt: skip
+                    status = REJECT_BLOCKED + 1
+            else:
+                blocked = _group_blocked(
+                    points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
+                    angle_tol, arc_start, arc_len,
+                )  # fmt: skip
+                status = (REJECT_BLOCKED if blocked else REJECT_DEGENERATE) + 1
+            if status:
+                break
+        if status:
+            counters[status - 1] += 1
+            continue
+
+        node = n_nodes
+        n_nodes += 1
+        node_cand[node] = c
+        if ng == 2:
+            node_kind[node] = NODE_VV
+        elif ng == 3:
+            node_kind[node] = NODE_EVE if gk[1] == GEN_VERTEX else NODE_VEE
+        else:
+            node_kind[node] = NODE_E4
+        for j in range(ng):
+            node_gkind[node, j] = gk[j]
+            node_gid[node, j] = gid[j]
+            node_tau[node, j] = g_tau[gg[j]]
+        node_start[node] = start
+        node_dir[node] = u
+        for side in range(2):
+            outer = first if side == 0 else last
+            count = g_hi[outer] - g_lo[outer]
+            node_end[node, side] = END_FREE
+            if _group_blocked(
+                points, offsets, normals, c_poly[g_lo[outer]:], c_kind[g_lo[outer]:], c_local[g_lo[outer]:], count,
+                u, angle_tol, arc_start, arc_len,
+            ):  # fmt: skip
+                node_end[node, side] = END_TERMINAL
+                continue
+            g = outer - 1 if side == 0 else outer + 1
+            while 0 <= g < n_groups:
+                count = g_hi[g] - g_lo[g]
+                if _group_blocked(
+                    points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
+                    angle_tol, arc_start, arc_len,
+                ):  # fmt: skip
+                    node_end[node, side] = face_group[c_poly[g_lo[g]]]
+                    break
+                g = g - 1 if side == 0 else g + 1
+
+        # relax one generator at a time: an edge in both directions, a vertex along each of its edges
+        for j in range(ng):
+            if gk[j] == GEN_EDGE:
+                n_retained = 0
+                norm = -1
+                for k in range(ng):
+                    if k == j:
+                        continue
+                    r_kind[n_retained] = gk[k]
+                    r_id[n_retained] = gid[k]
+                    r_group[n_retained] = gg[k]
+                    if gk[k] == GEN_EDGE and (norm < 0 or gid[k] < r_id[norm]):
+                        norm = n_retained
+                    n_retained += 1
+                if norm < 0:
+                    continue
+                norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                for sigma in (1.0, -1.0):
+                    ok, kind, e0, e1, s, direction = _relaxed_arc(
+                        points, offsets, normals, areas, vertices, edges, n_vertices,
+                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
+                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
+                        plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
+                        sl_poly, sl_a, sl_b, n_sliding, polys, kinds, locals_, arc_start, arc_len, codes,
+                    )  # fmt: skip
+                    if not ok:
+                        continue
+                    inc_node[n_inc] = node
+                    inc_kind[n_inc] = kind
+                    inc_codes[n_inc] = codes
+                    inc_end[n_inc, 0] = e0
+                    inc_end[n_inc, 1] = e1
+                    inc_s[n_inc] = s
+                    inc_dir[n_inc] = direction
+                    n_inc += 1
+            else:
+                v = gid[j]
+                for slot in range(ve_off[v], ve_off[v + 1]):
+                    e = ve_edge[slot]
+                    if not edge_mask[e]:
+                        continue
+                    taken = False
+                    for k in range(ng):
+                        if gk[k] == GEN_EDGE and gid[k] == e:
+                            taken = True
+                    if taken:
+                        continue
+                    n_retained = 0
+                    norm = -1
+                    for k in range(ng):
+                        r_kind[n_retained] = GEN_EDGE if k == j else gk[k]
+                        r_id[n_retained] = e if k == j else gid[k]
+                        r_group[n_retained] = gg[k]
+                        if k == j:
+                            norm = n_retained
+                        n_retained += 1
+                    norm_dir = _edge_direction(vertices, edges, e, v)
+                    ok, kind, e0, e1, s, direction = _relaxed_arc(
+                        points, offsets, normals, areas, vertices, edges, n_vertices,
+                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
+                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
+                        plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, 1.0,
+                        sl_poly, sl_a, sl_b, n_sliding, polys, kinds, locals_, arc_start, arc_len, codes,
+                    )  # fmt: skip
+                    if not ok:
+                        continue
+                    inc_node[n_inc] = node
+                    inc_kind[n_inc] = kind
+                    inc_codes[n_inc] = codes
+                    inc_end[n_inc, 0] = e0
+                    inc_end[n_inc, 1] = e1
+                    inc_s[n_inc] = s
+                    inc_dir[n_inc] = direction
+                    n_inc += 1
+    return (
+        node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
+        node_dir[:n_nodes], node_tau[:n_nodes], node_end[:n_nodes],
+        inc_node[:n_inc], inc_kind[:n_inc], inc_codes[:n_inc], inc_end[:n_inc], inc_s[:n_inc], inc_dir[:n_inc],
+        counters,
+    )
+
+
+def validate_candidates(scene, topology, bvh, candidates, edge_mask):
+    """Cast every candidate line; return (NodeChunk, IncidenceChunk, counters (N_COUNTERS,) int64).
+
+    scene: core.scene.Scene; topology: core.skeleton.topology.Topology; bvh: core.bvh.BVH of the scene;
+    candidates: NodeCandidates; edge_mask (E,) bool: the edges a vertex generator may slide along.
+    """
+    grown = scene.diagonal
+    result = _validate_chunk(
+        scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
+        scene.polygon_vertex_ids, scene.polygon_edge_ids, scene.areas, *bvh.arrays,
+        scene.vertices, scene.edges, topology.vertex_face_offsets, topology.vertex_faces,
+        topology.vertex_face_corner, topology.vertex_edge_offsets, topology.vertex_edges,
+        scene.edge_face_offsets, scene.edge_faces, topology.edge_face_local, topology.face_group,
+        np.ascontiguousarray(edge_mask, dtype=np.bool_), candidates.kind, candidates.vertices, candidates.edges,
+        np.ascontiguousarray(candidates.origin, dtype=np.float64),
+        np.ascontiguousarray(candidates.direction, dtype=np.float64),
+        scene.bbox_min - grown, scene.bbox_max + grown, scene.diagonal, scene.tol.length, scene.tol.cosine,
+    )  # fmt: skip
+    (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end,
+     i_node, i_kind, i_codes, i_end, i_s, i_dir, counters) = result  # fmt: skip
+    nodes = NodeChunk(n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end)
+    incidences = IncidenceChunk(i_node, i_kind, i_codes, i_end, i_s, i_dir)
+    return nodes, incidences, counters
+
+
+@dataclass(frozen=True, eq=False)
+class NodeChunk:
+    """N validated nodes. kind (N,) int8 NODE_*; gen_kind (N, 4) int8 GEN_* and gen_id (N, 4) int64, the
+    generators in line order (GEN_NONE / -1 padded); start (N, 3), direction (N, 3) unit: the line is
+    start + tau direction; tau (N, 4) each generator's position; end (N, 2) int64 the face groups met beyond
+    the first and the last generator (END_TERMINAL when the line stops on it, END_FREE when it leaves)."""
+
+    kind: np.ndarray
+    gen_kind: np.ndarray
+    gen_id: np.ndarray
+    start: np.ndarray
+    direction: np.ndarray
+    tau: np.ndarray
+    end: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+
+@dataclass(frozen=True, eq=False)
+class IncidenceChunk:
+    """M (node, arc) incidences. node (M,) int64 index into the NodeChunk; kind (M,) int8 ARC_*; codes (M, 3)
+    int64 the arc's generators in canonical line order (vertex v -> v, edge e -> V + e; -1 padded); end (M, 2)
+    int64 the face groups beyond the first and last generator (END_*); s (M,) float64 the node's coordinate on
+    the arc's parameter edge; direction (M,) int8 +1 when the arc leaves the node towards larger s."""
+
+    node: np.ndarray
+    kind: np.ndarray
+    codes: np.ndarray
+    end: np.ndarray
+    s: np.ndarray
+    direction: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.node)
