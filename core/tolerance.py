@@ -20,6 +20,7 @@ class Tolerance:
     relative: float = 1e-9
     planarity_relative: float = 1e-7
     cosine: float = 1e-12
+    snap_lengths: float = 16.0
 
     @property
     def length(self) -> float:
@@ -35,6 +36,13 @@ class Tolerance:
     def area(self) -> float:
         """Areas below this are zero (a square of side `length`)."""
         return self.length * self.length
+
+    @property
+    def snap(self) -> float:
+        """Mesh features (points, segment ends) closer than this to a mesh vertex or side are moved onto it,
+        and shorter segment pieces are dropped: slivers thinner than a few `length` leave "is this point on
+        that side" without a consistent answer between neighbouring elements."""
+        return self.snap_lengths * self.length
 
     @staticmethod
     def for_points(points: np.ndarray) -> "Tolerance":
