@@ -36,12 +36,14 @@ h.statistics() -> HierarchyStats (smallest-angle histograms, depth, leaves per p
 
 from .grid import GridSettings
 from .hierarchy import ANGLE_BINS, Hierarchy, HierarchyStats, StepReport, TriangleMesh, VertexAncestry
+from .shape import ShapeSettings
 
 __all__ = [
     "ANGLE_BINS",
     "GridSettings",
     "Hierarchy",
     "HierarchyStats",
+    "ShapeSettings",
     "StepReport",
     "TriangleMesh",
     "VertexAncestry",

@@ -8,6 +8,7 @@ import numpy as np
 from . import lazy_wavelet
 from .geometry import cross2, triangle_areas_2d, triangle_min_angles
 from .grid import GridSettings
+from .shape import ShapeSettings
 from .structure import HierarchyCore
 
 ANGLE_BINS = np.array([0.0, 1.0, 2.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 60.0])
@@ -114,12 +115,12 @@ class Hierarchy(HierarchyCore):
     """
 
     @classmethod
-    def from_scene(cls, scene, grid: GridSettings | None = None) -> "Hierarchy":
+    def from_scene(cls, scene, grid: GridSettings | None = None, shape: ShapeSettings | None = None) -> "Hierarchy":
         """One hierarchy per polygon of a core.scene.Scene (polygon_points, polygon_offsets, tol)."""
         offsets = np.asarray(scene.polygon_offsets)
         points = np.asarray(scene.polygon_points, dtype=np.float64)
         polygons = [points[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
-        return cls(polygons, scene.tol, grid)
+        return cls(polygons, scene.tol, grid, shape)
 
     # ------------------------------------------------------------------ insertion
 
@@ -351,13 +352,17 @@ class Hierarchy(HierarchyCore):
     def _memory_bytes(self) -> int:
         columns = [
             self._xy, self._v_polygon, self._v_level, self._v_element, self._v_anc, self._v_w,
-            self._v_constrained, self._e_polygon, self._e_level, self._e_parent, self._e_vertices,
+            self._v_constrained, self._v_kind, self._e_polygon, self._e_level, self._e_parent, self._e_vertices,
             self._e_hedges, self._e_first_child, self._e_child_count,
         ]
         total = sum(c.buf.nbytes for c in columns)
-        lists = [self._he_a, self._he_b, self._he_kids, self._he_split, self._he_elements, self._he_constrained]
+        lists = [
+            self._he_a, self._he_b, self._he_kids, self._he_split, self._he_parent, self._he_elements,
+            self._he_constrained,
+        ]
         total += sum(sys.getsizeof(x) for x in lists)
-        # Python ints above 256 are separate 28-byte objects; element lists and split tuples likewise.
+        # Python ints above 256 are separate 28-byte objects (a parent is the split HEdge's own int); element
+        # lists and split tuples likewise.
         total += 28 * (len(self._he_a) + len(self._he_b) + len(self._he_split))
         total += sum(sys.getsizeof(x) for x in self._he_elements)
         total += sum(sys.getsizeof(x) for x in self._he_kids if x is not None)

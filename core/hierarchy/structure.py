@@ -23,6 +23,7 @@ from .geometry import (
     side_parameters,
 )
 from .grid import GridSettings, interior_grid_points, side_grid_parameters
+from .shape import ShapeSettings, wedge_target
 
 # The triangulation works on integers, 1/1024 of the length tolerance: points further apart than the
 # tolerance never share a cell, needles a few tolerances wide keep their shape, and coordinates stay far
@@ -32,12 +33,11 @@ _CDT_UNITS_PER_TOLERANCE = 1024.0
 
 _NO_POINTS = np.zeros((0, 2))
 _NO_IDS = np.zeros(0, dtype=np.int64)
+_NO_KINDS = np.zeros(0, dtype=np.int8)
 
-# Inserted points closer than this many length tolerances to a side or a vertex are moved onto it, and
-# shorter segment pieces are dropped: otherwise they make slivers thinner than the tolerance, inside which
-# "is this point on that side" has no consistent answer between neighbours. Segments are still followed
-# to within this distance because their neighbouring pieces split the shared sides.
-_SNAP_TOLERANCES = 16.0
+# What made a vertex (its provenance, for the quality statistics): a polygon corner, the regular grid, an
+# inserted point, or a constrained segment (an end, a crossing, or where it crosses an element side).
+CORNER, GRID, POINT, SEGMENT = 0, 1, 2, 3
 
 # Point location compares points with all children of an element at once; this bounds that array's size.
 _LOCATE_BATCH = 1 << 20
@@ -72,7 +72,8 @@ class _Column:
 class HierarchyCore:
     """The hierarchical triangulations of a set of convex planar polygons (see the package docstring)."""
 
-    def __init__(self, polygons: list, tolerance, grid: GridSettings | None = None):
+    def __init__(self, polygons: list, tolerance, grid: GridSettings | None = None,
+                 shape: ShapeSettings | None = None):
         self.polygons = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in polygons]
         for i, p in enumerate(self.polygons):
             if len(p) < 3:
@@ -80,6 +81,7 @@ class HierarchyCore:
         self.tol = tolerance
         self.eps = float(tolerance.length)
         self.grid = grid or GridSettings()
+        self.shape = shape or ShapeSettings()
         self.frames = build_frames(self.polygons, self.eps)
         self.polygon_count = len(self.polygons)
 
@@ -91,6 +93,7 @@ class HierarchyCore:
         self._v_anc = _Column(3, np.int64, -1)
         self._v_w = _Column(3, np.float64, 0.0)
         self._v_constrained = _Column(0, np.bool_, False)
+        self._v_kind = _Column(0, np.int8, CORNER)
         # elements
         self._e_polygon = _Column(0, np.int64, -1)
         self._e_level = _Column(0, np.int64, 0)
@@ -104,6 +107,7 @@ class HierarchyCore:
         self._he_b: list[int] = []
         self._he_kids: list = []
         self._he_split: list[int] = []
+        self._he_parent: list[int] = []
         self._he_elements: list[list[int]] = []
         self._he_constrained: list[bool] = []
         self._he_twins: dict[int, list] = {}
@@ -123,17 +127,18 @@ class HierarchyCore:
 
     # ------------------------------------------------------------------ construction helpers
 
-    def _new_vertices(self, polygon: int, xy: np.ndarray, constrained: bool = False) -> np.ndarray:
+    def _new_vertices(self, polygon: int, xy: np.ndarray, kind, constrained: bool = False) -> np.ndarray:
         count = len(xy)
         if count == 0:
             return _NO_IDS
         start = self._xy.grow(count)
-        for column in (self._v_polygon, self._v_level, self._v_element, self._v_anc, self._v_w):
+        for column in (self._v_polygon, self._v_level, self._v_element, self._v_anc, self._v_w, self._v_kind):
             column.grow(count)
         self._v_constrained.grow(count)
         self._xy.buf[start : start + count] = xy
         self._v_polygon.buf[start : start + count] = polygon
         self._v_constrained.buf[start : start + count] = constrained
+        self._v_kind.buf[start : start + count] = kind
         return np.arange(start, start + count)
 
     def _new_hedge(self, a: int, b: int, constrained: bool = False) -> int:
@@ -141,6 +146,7 @@ class HierarchyCore:
         self._he_b.append(b)
         self._he_kids.append(None)
         self._he_split.append(-1)
+        self._he_parent.append(-1)
         self._he_elements.append([])
         self._he_constrained.append(constrained)
         return len(self._he_a) - 1
@@ -159,7 +165,7 @@ class HierarchyCore:
 
     def _add_root(self, p: int) -> None:
         corners_2d = self.frames.corners_2d[p]
-        ids = self._new_vertices(p, corners_2d)
+        ids = self._new_vertices(p, corners_2d, CORNER)
         self._v_level.buf[ids] = 0
         element = self._new_elements(1, p, 0, -1)
         assert element == p
@@ -203,9 +209,9 @@ class HierarchyCore:
 
     # ------------------------------------------------------------------ matching
 
-    def _side_vertex(self, hedge: int, forward: bool, t_side: float, snap_distance: float) -> int:
+    def _side_vertex(self, hedge: int, forward: bool, t_side: float, snap_distance: float, kind: int) -> int:
         """The vertex at parameter t_side along an element side (its HEdge `hedge`, in side order): an
-        existing vertex within snap_distance, or a new one splitting the leaf sub-HEdge there."""
+        existing vertex within snap_distance, or a new one of provenance `kind` splitting the leaf sub-HEdge."""
         xy = self._xy.buf
         a = xy[self._he_a[hedge]]
         b = xy[self._he_b[hedge]]
@@ -232,10 +238,11 @@ class HierarchyCore:
             return self._he_a[h]
         if abs(t - tb) <= snap:
             return self._he_b[h]
-        return self._split_leaf(h, (t - ta) / (tb - ta))
+        return self._split_leaf(h, (t - ta) / (tb - ta), kind)
 
-    def _split_leaf(self, hedge: int, t_local: float) -> int:
-        """Split a leaf HEdge and all its twins at local parameter t_local; return hedge's new vertex."""
+    def _split_leaf(self, hedge: int, t_local: float, kind: int) -> int:
+        """Split a leaf HEdge and all its twins at local parameter t_local with new vertices of provenance
+        `kind`; return hedge's new vertex."""
         group = [(hedge, False)] + self._he_twins.get(hedge, [])
         xy = self._xy.buf
         low, high, made = [], [], []
@@ -244,11 +251,13 @@ class HierarchyCore:
             b = self._he_b[member]
             t = 1.0 - t_local if flipped else t_local
             position = xy[a] + t * (xy[b] - xy[a])
-            vertex = int(self._new_vertices(int(self._v_polygon.buf[a]), position[None, :])[0])
+            vertex = int(self._new_vertices(int(self._v_polygon.buf[a]), position[None, :], kind)[0])
             xy = self._xy.buf
             constrained = self._he_constrained[member]
             first = self._new_hedge(a, vertex, constrained)
             second = self._new_hedge(vertex, b, constrained)
+            self._he_parent[first] = self._he_parent[second] = member
+            self._side_ancestry(member, vertex)
             self._he_kids[member] = (first, second)
             self._he_split[member] = vertex
             self._dirty.append(member)
@@ -261,6 +270,35 @@ class HierarchyCore:
                     self._he_twins[h] = [(g, fi ^ fj) for j, (g, fj) in enumerate(side) if j != i]
         return made[0]
 
+    def _side_ancestry(self, hedge: int, vertex: int) -> None:
+        """Ancestry of a new vertex splitting leaf HEdge `hedge`. It first appears in the sub-triangulations of
+        the leaves whose side is `hedge` or an HEdge containing it (one per side, the coarser still waiting
+        for anchoring); its ancestor is the coarsest of them, which keeps every ancestor at a lower level
+        whichever is subdivided first. It interpolates between the ends of that leaf's side alone."""
+        owner, side = -1, -1
+        h = hedge
+        while h >= 0:
+            for e in self._he_elements[h]:
+                if self._e_child_count.buf[e] == 0 and (owner < 0 or self._e_level.buf[e] < self._e_level.buf[owner]):
+                    owner, side = e, h
+            h = self._he_parent[h]
+        a, b = self._he_a[side], self._he_b[side]
+        if owner < self.polygon_count:
+            corners = self._root_corners[owner].tolist()
+            i, j = sorted((corners.index(a), corners.index(b)))
+            # Side c_i c_j lies in fan triangle c_0 c_m c_(m+1): m = 1 for the first side, k - 2 for the last.
+            fan = 0 if (i, j) == (0, 1) else (len(corners) - 3 if i == 0 else i - 1)
+            ancestors = self._root_fans[owner][fan]
+        else:
+            ancestors = self._e_vertices.buf[owner]
+        xy = self._xy.buf
+        direction = xy[b] - xy[a]
+        t = float((xy[vertex] - xy[a]) @ direction) / float(direction @ direction)
+        self._v_level.buf[vertex] = self._e_level.buf[owner] + 1
+        self._v_element.buf[vertex] = owner
+        self._v_anc.buf[vertex] = ancestors
+        self._v_w.buf[vertex] = np.where(ancestors == a, 1.0 - t, np.where(ancestors == b, t, 0.0))
+
     # ------------------------------------------------------------------ subdivision of one element
 
     def _subdivide(self, element: int, points: np.ndarray, segments: np.ndarray, step: float | None) -> bool:
@@ -268,7 +306,7 @@ class HierarchyCore:
         it, the grid of spacing `step` (None: no grid) and every point already on its sides.
         Returns False when there was nothing to insert (the element stays a leaf)."""
         eps = self.eps
-        snap = _SNAP_TOLERANCES * eps
+        snap = self.tol.snap
         corners, hedges = self._sides(element)
         corners = [int(c) for c in corners]
         hedges = [int(h) for h in hedges]
@@ -280,9 +318,15 @@ class HierarchyCore:
         side_vectors = side_b - side_a
         side_lengths = np.sqrt(np.einsum("ij,ij->i", side_vectors, side_vectors))
 
+        # Points inserted with a grid (light maxima) stay put and the grid avoids them; without one they
+        # are free samples, moved where their triangles stay well shaped.
+        free = points if step is None and self.shape.enabled else _NO_POINTS
+        if len(free):
+            points = _NO_POINTS
         features = np.concatenate([points, segments.reshape(-1, 2)]) if len(segments) else points
         feature_vertex = np.full(len(features), -1, dtype=np.int64)
         interior_xy = _NO_POINTS
+        interior_kind = _NO_KINDS
         if len(features):
             t, distance = side_parameters(features, side_a, side_b)
             feature_sides = distance <= snap
@@ -297,11 +341,20 @@ class HierarchyCore:
                     feature_vertex[f] = ring_now[int(np.argmin(gap))]
                     continue
                 s = int(np.argmin(distance[f]))
-                feature_vertex[f] = self._side_vertex(hedges[s], forward[s], float(t[f, s]), snap)
+                kind = POINT if f < len(points) else SEGMENT
+                feature_vertex[f] = self._side_vertex(hedges[s], forward[s], float(t[f, s]), snap, kind)
             interior = np.nonzero(~on_boundary & (inside.min(axis=1) > 0.0))[0]
             unique_xy, representative = _merge_close(features[interior], snap)
             feature_vertex[interior] = -2 - representative
             interior_xy = unique_xy
+            # A point merged with a segment end lies on the segment: the segment made it.
+            interior_kind = np.full(len(unique_xy), POINT, dtype=np.int8)
+            np.maximum.at(interior_kind, representative, np.where(interior < len(points), POINT, SEGMENT))
+        if len(free):
+            inside = cross2(side_vectors, free[:, None, :] - side_a) / side_lengths
+            placed = self._place_free_points(free[inside.min(axis=1) >= -snap], hedges, forward, interior_xy)
+            interior_xy = np.concatenate([interior_xy, placed])
+            interior_kind = np.concatenate([interior_kind, np.full(len(placed), POINT, dtype=np.int8)])
 
         seg_ends = feature_vertex[len(points) :].reshape(-1, 2)
         if len(seg_ends):
@@ -320,10 +373,11 @@ class HierarchyCore:
                 chain, _ = self._chain(hedges[s], forward[s])
                 away = np.concatenate([self._xy.buf[chain], feature_xy])
                 for tg in side_grid_parameters(side_a[s], side_b[s], step, away, radius, eps):
-                    self._side_vertex(hedges[s], forward[s], float(tg), eps)
+                    self._side_vertex(hedges[s], forward[s], float(tg), eps, GRID)
             grid_xy = interior_grid_points(corner_xy, step, feature_xy, kept_segments, radius, eps)
             if len(grid_xy):
                 interior_xy = np.concatenate([interior_xy, grid_xy])
+                interior_kind = np.concatenate([interior_kind, np.full(len(grid_xy), GRID, dtype=np.int8)])
 
         ring, ring_hedges = [], []
         for s in range(k):
@@ -335,7 +389,7 @@ class HierarchyCore:
             return False
 
         polygon = int(self._e_polygon.buf[element])
-        interior_ids = self._new_vertices(polygon, interior_xy)
+        interior_ids = self._new_vertices(polygon, interior_xy, interior_kind)
         ring_position = {v: i for i, v in enumerate(ring)}
         seg_local = np.array(
             [[ring_position[v] if v >= 0 else n_ring - 2 - v for v in pair] for pair in seg_ends.tolist()],
@@ -366,7 +420,8 @@ class HierarchyCore:
         crossing_ids = _NO_IDS
         if len(out_xy) > len(cdt_xy):
             estimates = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
-            crossing_ids = self._new_vertices(polygon, _exact_crossings(estimates, cdt_xy[seg_local]), True)
+            crossings = _exact_crossings(estimates, cdt_xy[seg_local])
+            crossing_ids = self._new_vertices(polygon, crossings, SEGMENT, True)
         global_of_local = np.concatenate([np.asarray(ring, dtype=np.int64), interior_ids, crossing_ids])
 
         constrained_pairs = set()
@@ -390,13 +445,49 @@ class HierarchyCore:
         )
         return True
 
+    def _place_free_points(self, points: np.ndarray, hedges: list, forward: list, interior_xy: np.ndarray
+                           ) -> np.ndarray:
+        """Place free points (M, 2) of an element one by one (shape.wedge_target): onto a ring vertex, onto a
+        ring piece (splitting its HEdge, so that the neighbour is anchored), or inside, unless an interior
+        point (I, 2) already there is closer than the merge fraction of its distance to the ring.
+        Returns the free points kept inside (K, 2)."""
+        snap = self.tol.snap
+        ring, ring_hedges = [], []
+        for s in range(len(hedges)):
+            chain, leaves = self._chain(hedges[s], forward[s])
+            ring.extend(chain)
+            ring_hedges.extend(leaves)
+        kept = [interior_xy]
+        already = len(interior_xy)
+        for p in points:
+            ring_xy = self._xy.buf[ring]
+            target = wedge_target(p, ring_xy, self.shape, snap)
+            if target[0] == "vertex":
+                continue
+            if target[0] == "piece":
+                i, s = target[1], target[2]
+                h = ring_hedges[i]
+                along = self._he_a[h] == ring[i]
+                vertex = self._split_leaf(h, s if along else 1.0 - s, POINT)
+                first, second = self._he_kids[h]
+                ring.insert(i + 1, vertex)
+                ring_hedges[i : i + 1] = [first, second] if along else [second, first]
+                continue
+            others = np.concatenate(kept)
+            if len(others):
+                reach = max(self.shape.merge_fraction * np.hypot(*(ring_xy - p).T).min(), snap)
+                if np.hypot(*(others - p).T).min() <= reach:
+                    continue
+            kept.append(p[None, :])
+        return np.concatenate(kept)[already:]
+
     def _child_hedges(self, first: int, triangles: list, global_of_local: list, ring_hedges: list,
                       constrained_pairs: set) -> list:
         """HEdges of new children first.. (local triangles): ring sides reuse the leaf sub-HEdges of the
         parent's sides, each inner edge gets one new HEdge shared by its two triangles."""
         n_ring = len(ring_hedges)
         he_a, he_b, he_kids, he_split = self._he_a, self._he_b, self._he_kids, self._he_split
-        he_elements, he_constrained = self._he_elements, self._he_constrained
+        he_parent, he_elements, he_constrained = self._he_parent, self._he_elements, self._he_constrained
         inner_edge: dict = {}
         result = []
         for c, tri in enumerate(triangles):
@@ -415,6 +506,7 @@ class HierarchyCore:
                         he_b.append(global_of_local[v])
                         he_kids.append(None)
                         he_split.append(-1)
+                        he_parent.append(-1)
                         he_elements.append([])
                         he_constrained.append(key in constrained_pairs)
                         inner_edge[key] = h
@@ -478,7 +570,7 @@ class HierarchyCore:
             kids = np.arange(first, first + int(self._e_child_count.buf[element]))
             t_in, t_out = clip_segment_to_polygon(self._element_corners_xy(kids), a, b)
             length = float(np.linalg.norm(b - a))
-            shortest = _SNAP_TOLERANCES * self.eps
+            shortest = self.tol.snap
             for i in np.nonzero((t_out - t_in) * length > shortest)[0]:
                 stack.append((int(kids[i]), a + t_in[i] * (b - a), a + t_out[i] * (b - a)))
 
