@@ -85,7 +85,8 @@ def solver_settings(props: VisRadSettings) -> dict:
     illumination), form_factors ('exact' or a ray count), preset ('accurate', 'fast' or 'custom')."""
     return {
         "preset": props.preset.lower(),
-        "jnd": float(props.jnd),
+        # Blender stores floats in single precision: 0.02 reads back as 0.0199999995
+        "jnd": float(f"{props.jnd:.7g}"),
         "max_iterations": int(props.max_iterations),
         "max_bounces": None if props.max_bounces == 0 else int(props.max_bounces),
         "form_factors": "exact" if props.form_factors == "EXACT" else int(props.rays),
@@ -98,6 +99,11 @@ def _get_exclude(obj) -> bool:
 
 def _set_exclude(obj, value: bool) -> None:
     obj[EXCLUDE_PROPERTY] = bool(value)
+
+
+def _exclusion_changed(obj, _context) -> None:
+    # a custom property change does not reach the depsgraph by itself; the session handler listens there
+    obj.update_tag()
 
 
 classes = (VisRadSettings,)
@@ -114,6 +120,7 @@ def register() -> None:
         description="Leave this object out of the radiosity solution (it neither receives nor blocks light)",
         get=_get_exclude,
         set=_set_exclude,
+        update=_exclusion_changed,
     )
 
 

@@ -54,14 +54,17 @@ class Session:
     """What the stages of one Blender scene share.
 
     scene, source_map: the conversion the stages work on; settings: the solver keyword arguments it was made
-    with; key: its fingerprint; state: what the stages store (solver, result, statistics), by name;
-    dirty: something in Blender changed since the conversion (the next `open` decides if it matters).
+    with; key: its fingerprint; layout: the objects and collections of the Blender scene then (for the
+    depsgraph handler); state: what the stages store (solver, result, statistics), by name; dirty: the
+    depsgraph handler saw a change that can alter the conversion (a hint for the panel: the next `open`
+    decides by fingerprint).
     """
 
     scene: object
     source_map: SourceMap
     settings: dict
     key: str
+    layout: tuple
     state: dict = field(default_factory=dict)
     dirty: bool = False
 
@@ -103,43 +106,57 @@ class SessionStore:
         session = self._sessions.get(uid)
         if session is not None and session.key == key:
             session.dirty = False
+            session.layout = _layout_signature(blender_scene)
             return session
-        session = Session(scene, source_map, dict(settings), key)
+        session = Session(scene, source_map, dict(settings), key, _layout_signature(blender_scene))
         self._sessions[uid] = session
         return session
-
-    def discard(self, blender_scene) -> None:
-        self._sessions.pop(blender_scene.session_uid, None)
 
     def clear(self) -> None:
         self._sessions.clear()
 
-    def mark_dirty(self, blender_scene) -> None:
-        session = self._sessions.get(blender_scene.session_uid)
-        if session is not None:
-            session.dirty = True
-
 
 store = SessionStore()
 
-# What a depsgraph update must touch to possibly change the converted scene: geometry, transforms, materials
-# (shading) and lights; selection or viewport-only changes arrive as updates too and are ignored.
-_RELEVANT_TYPES = (bpy.types.Object, bpy.types.Mesh, bpy.types.Material, bpy.types.Light, bpy.types.Collection)
+
+def _layout_signature(blender_scene) -> tuple:
+    """Which objects and collections the scene has and which are hidden from render (the add-on's own left
+    out): what a Collection or Scene update may have changed, compared instead of converting again."""
+    objects = sorted((o.name, o.hide_render) for o in blender_scene.objects if o.get(ROLE_PROPERTY) is None)
+    collections = sorted(
+        (c.name, c.hide_render) for c in blender_scene.collection.children_recursive if c.get(ROLE_PROPERTY) is None
+    )
+    return tuple(objects), tuple(collections)
+
+
+def _changes_conversion(datablock, update) -> bool:
+    """Whether a depsgraph update of one of the user's datablocks can change the converted scene. Objects
+    also get shading updates when something else in the scene changes (e.g. results are written): only
+    their geometry and transform count."""
+    if isinstance(datablock, bpy.types.Object):
+        return update.is_updated_geometry or update.is_updated_transform
+    if isinstance(datablock, bpy.types.Material | bpy.types.Light | bpy.types.NodeTree):
+        return update.is_updated_shading or update.is_updated_geometry
+    return update.is_updated_geometry and not isinstance(datablock, bpy.types.Collection | bpy.types.Scene)
 
 
 @persistent
 def _on_depsgraph_update(blender_scene, depsgraph) -> None:
-    if store.get(blender_scene) is None:
+    session = store.get(blender_scene)
+    if session is None or session.dirty:
         return
+    layout_changed = False
     for update in depsgraph.updates:
         datablock = update.id.original
         # the add-on's own results change the depsgraph too, but conversion leaves them out
-        if not isinstance(datablock, _RELEVANT_TYPES) or datablock.get(ROLE_PROPERTY) is not None:
+        if datablock.get(ROLE_PROPERTY) is not None:
             continue
-        changed = update.is_updated_geometry or update.is_updated_transform or update.is_updated_shading
-        if changed or isinstance(datablock, bpy.types.Collection):
-            store.mark_dirty(blender_scene)
+        if _changes_conversion(datablock, update):
+            session.dirty = True
             return
+        layout_changed |= isinstance(datablock, bpy.types.Collection | bpy.types.Scene)
+    if layout_changed and _layout_signature(blender_scene) != session.layout:
+        session.dirty = True
 
 
 @persistent
