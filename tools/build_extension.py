@@ -1,6 +1,6 @@
 """Build the per-platform VisRad extension zips and validate them with Blender's own extension validator.
 
-    .venv/bin/python tools/build_extension.py [--platforms linux-x64 ...] [--no-validate]
+    .venv/bin/python tools/build_extension.py [--platforms linux-x64 ...] [--no-validate] [--dist DIR]
 
 For each Blender platform the script downloads, with `pip download --only-binary=:all: --no-deps`, the
 unmodified wheels of scipy, numba, llvmlite and pythoncdt for CPython 3.11 (Blender 4.2-5.0) and 3.13
@@ -181,6 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--platforms", nargs="+", choices=sorted(PIP_PLATFORMS), default=list(PIP_PLATFORMS))
     parser.add_argument("--no-validate", action="store_true", help="build the zips without validating them")
+    parser.add_argument("--dist", type=Path, default=DIST_DIR, help=f"where the zips go (default {DIST_DIR})")
     args = parser.parse_args(argv)
 
     manifest_text = MANIFEST.read_text()
@@ -194,10 +195,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"SKIPPED {platform}: {missing}")
             failures += 1
             continue
-        archive = DIST_DIR / f"visrad-{version}-{platform}.zip"
+        archive = args.dist / f"visrad-{version}-{platform}.zip"
         write_zip(archive, platform_manifest(manifest_text, platform, [w.name for w in wheels]), wheels)
         size = archive.stat().st_size / 2**20
-        print(f"built {archive.relative_to(ROOT)} ({size:.1f} MiB, {len(set(wheels))} wheels)")
+        print(f"built {archive} ({size:.1f} MiB, {len(set(wheels))} wheels)")
         for wheel in sorted({w.name for w in wheels}):
             print(f"    {wheel}")
         if args.no_validate:
