@@ -290,10 +290,20 @@ def _near_plane(point, normal, offset, tol):
 
 
 @njit(cache=True)
+def _parallel_edges(vertices, edges, e, f, tol):
+    """Whether edge f stays within tol of a line parallel to edge e over its whole length."""
+    d = _edge_direction(vertices, edges, e, -1)
+    span = vertices[edges[f, 1]] - vertices[edges[f, 0]]
+    along = _dot(span, d)
+    off = span - along * d
+    return _dot(off, off) <= tol * tol
+
+
+@njit(cache=True)
 def _coplanar_swath(vertices, edges, normals, plane_offsets, vf_off, vf_face, ef_off, ef_face, r_kind, r_id, n, tol):
     """Whether the arc's lines all lie in one plane with a face of a generator, or its three edges share a
-    plane: such swaths slide in a face plane (face events, section 2.3) or are the coplanar edge triples the
-    paper rejects; they are not EV / EEE arcs."""
+    plane or two of them are parallel: such swaths slide in a face plane (face events, section 2.3) or are the
+    degenerate edge triples the paper rejects (1999, section 2.2); they are not EV / EEE arcs."""
     for j in range(n):
         if r_kind[j] == GEN_VERTEX:
             v = r_id[j]
@@ -325,6 +335,12 @@ def _coplanar_swath(vertices, edges, normals, plane_offsets, vf_off, vf_face, ef
                 if inside:
                     return True
     if n == 3 and r_kind[0] == GEN_EDGE and r_kind[1] == GEN_EDGE and r_kind[2] == GEN_EDGE:
+        # two parallel edges: every line meeting both lies in their plane, a pencil through the third edge's
+        # crossing point, which the simplest-configuration rule leaves out (no EEE visual event there)
+        for j in range(3):
+            for k in range(j + 1, 3):
+                if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol):
+                    return True
         a = vertices[edges[r_id[0], 0]]
         normal = _cross(vertices[edges[r_id[0], 1]] - a, vertices[edges[r_id[1], 0]] - a)
         length = np.sqrt(_dot(normal, normal))
