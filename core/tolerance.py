@@ -21,6 +21,7 @@ class Tolerance:
     planarity_relative: float = 1e-7
     cosine: float = 1e-12
     snap_lengths: float = 16.0
+    curve_relative: float = 1e-6
 
     @property
     def length(self) -> float:
@@ -43,6 +44,11 @@ class Tolerance:
         and shorter segment pieces are dropped: slivers thinner than a few `length` leave "is this point on
         that side" without a consistent answer between neighbouring elements."""
         return self.snap_lengths * self.length
+
+    @property
+    def curve(self) -> float:
+        """Largest distance between a sampled curve (the trace of an EEE swath, a quadric) and its polyline."""
+        return self.curve_relative * self.scale
 
     @staticmethod
     def for_points(points: np.ndarray) -> "Tolerance":
