@@ -1,0 +1,286 @@
+"""Benchmark `skeleton`: Visibility Skeleton construction and queries on the office family (seed 003, Table 1).
+
+Per office size (84 ... 1488 polygons, the sizes of Table 1): build seconds, nodes and arcs by type (whatever
+keys skel.stats reports), skeleton bytes (skel.stats['bytes']), peak resident memory of the build, and the
+paper's Table 1 row at that size (time on a 195 MHz R10000, memory, thousands of nodes and arcs) with our
+speed-up. Then the growth exponent of time against polygons (least squares on log-log; the paper: n^2.4), the
+lazy build from one source (the first light) against the full build on the largest size (paper, 1488
+polygons: 4 min 15 s against 31 min 59 s), and on that skeleton the query costs: form_factor and
+visible_boundary per vertex view, discontinuities and blockers per (light, receiver) pair (paper: 1.2-1.5 ms
+per view, 1.3-28.6 ms per discontinuity mesh, 4 ms for a blocker list).
+Targets of issue 3: at least 30x faster than Table 1 at every size, at most 416 MB at 1488 polygons, the
+one-source lazy build at least 5x faster than the full build there.
+
+    python -m bench skeleton [--sizes 84,168,...] [--quick] [--views N] [--pairs N] [--seed S] [--progress]
+"""
+
+import argparse
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .common import Stopwatch, peak_memory_bytes, print_table, write_results
+from .scenes import OFFICE_SIZES, SCENES
+
+#: seed 003, Table 1: polygons -> (construction seconds, memory MB, nodes x 1000, arcs x 1000)
+PAPER_TABLE_1 = {
+    84: (1.71, 1.8, 7, 16),
+    168: (12.74, 9.0, 37, 91),
+    312: (37.07, 21.0, 69, 165),
+    432: (99.0, 55.0, 199, 476),
+    756: (336.0, 135.0, 445, 1074),
+    1056: (876.0, 242.0, 753, 1836),
+    1488: (1919.0, 416.0, 1266, 3087),
+}
+#: seed 003, section 5: the part of the skeleton for one source of scene (g), 1488 polygons
+PAPER_LAZY_SECONDS = 255.0
+SPEED_UP_TARGET = 30.0
+LAZY_SPEED_UP_TARGET = 5.0
+MEMORY_TARGET_MB = 416.0
+
+MB = 2.0**20
+_STATUS = Path("/proc/self/status")
+_CLEAR_REFS = Path("/proc/self/clear_refs")
+
+
+def _reset_peak() -> bool:
+    """Reset the kernel's resident high-water mark (Linux: 5 > clear_refs), so each build gets its own peak."""
+    try:
+        _CLEAR_REFS.write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+def _peak_since_reset() -> int:
+    """VmHWM of this process in bytes (the peak since the last reset), or the process peak if unreadable."""
+    try:
+        found = re.search(r"^VmHWM:\s+(\d+) kB", _STATUS.read_text(), re.MULTILINE)
+    except OSError:
+        found = None
+    return int(found.group(1)) * 1024 if found else peak_memory_bytes()
+
+
+def _progress_printer(label: str):
+    """A progress(stage, fraction) callback printing to stderr at most every 5 seconds."""
+    last = [0.0]
+
+    def progress(stage: str, fraction: float) -> None:
+        now = time.perf_counter()
+        if now - last[0] >= 5.0:
+            last[0] = now
+            print(f"  {label}: {stage} {100.0 * fraction:.0f} %", file=sys.stderr, flush=True)
+
+    return progress
+
+
+def _build(build_skeleton, scene, label: str, show_progress: bool, sources=None):
+    """(skeleton, wall seconds, peak resident bytes: of the build when the kernel lets us reset the high-water
+    mark, else of the process so far -- sizes run in increasing order, so the largest size's is still its own)."""
+    progress = _progress_printer(label) if show_progress else None
+    isolated = _reset_peak()
+    with Stopwatch() as watch:
+        skeleton = build_skeleton(scene, sources=sources, progress=progress)
+    return skeleton, watch.seconds, _peak_since_reset() if isolated else peak_memory_bytes()
+
+
+def _counts(stats: dict, key: str) -> dict:
+    return {str(kind): int(count) for kind, count in dict(stats.get(key, {})).items()}
+
+
+def construction(build_skeleton, sizes, show_progress: bool):
+    """One row per office size, and the (scene, skeleton) of the largest."""
+    rows = []
+    largest = None
+    for n in sizes:
+        scene = SCENES[f"office-{n}"]().build()
+        skeleton, seconds, peak = _build(build_skeleton, scene, f"office-{n}", show_progress)
+        stats = skeleton.stats
+        paper_seconds, paper_mb, paper_nodes, paper_arcs = PAPER_TABLE_1[n]
+        nodes, arcs = _counts(stats, "nodes"), _counts(stats, "arcs")
+        rows.append(
+            {
+                "polygons": scene.n_polygons,
+                "seconds": seconds,
+                "stats_seconds": float(stats.get("seconds", float("nan"))),
+                "nodes": nodes,
+                "arcs": arcs,
+                "nodes_total": sum(nodes.values()),
+                "arcs_total": sum(arcs.values()),
+                "skeleton_mb": float(stats.get("bytes", 0)) / MB,
+                "peak_mb": peak / MB,
+                "paper_seconds": paper_seconds,
+                "paper_mb": paper_mb,
+                "paper_nodes_k": paper_nodes,
+                "paper_arcs_k": paper_arcs,
+                "speed_up": paper_seconds / seconds,
+            }
+        )
+        largest = (n, scene, skeleton, seconds)
+    return rows, largest
+
+
+def growth_exponent(rows) -> float:
+    """Least-squares slope of log(seconds) against log(polygons); nan with fewer than two sizes."""
+    if len(rows) < 2:
+        return float("nan")
+    polygons = np.log([r["polygons"] for r in rows])
+    seconds = np.log([r["seconds"] for r in rows])
+    return float(np.polyfit(polygons, seconds, 1)[0])
+
+
+def lazy_against_full(build_skeleton, largest, show_progress: bool) -> dict:
+    n, scene, _, full_seconds = largest
+    light = int(scene.lights[0])
+    skeleton, seconds, peak = _build(build_skeleton, scene, f"office-{n} lazy", show_progress, sources=[light])
+    return {
+        "polygons": scene.n_polygons,
+        "source": light,
+        "lazy_seconds": seconds,
+        "full_seconds": full_seconds,
+        "speed_up": full_seconds / seconds,
+        "lazy_nodes_total": sum(_counts(skeleton.stats, "nodes").values()),
+        "lazy_peak_mb": peak / MB,
+        "paper_lazy_seconds": PAPER_LAZY_SECONDS if n == 1488 else None,
+        "paper_full_seconds": PAPER_TABLE_1[n][0],
+    }
+
+
+def _mean_ms(call, arguments) -> tuple[float, float]:
+    """Mean and largest milliseconds of call(*a) over the argument tuples."""
+    times = []
+    for a in arguments:
+        start = time.perf_counter()
+        call(*a)
+        times.append(time.perf_counter() - start)
+    return 1e3 * float(np.mean(times)), 1e3 * float(np.max(times))
+
+
+def query_costs(largest, views: int, pairs: int, seed: int) -> dict:
+    """Query times on the largest skeleton: vertex views of every light, (light, receiver) pairs."""
+    n, scene, skeleton, _ = largest
+    rng = np.random.default_rng(seed)
+    lights = scene.lights
+    is_light = np.zeros(scene.n_polygons, dtype=bool)
+    is_light[lights] = True
+    owner = np.repeat(np.arange(scene.n_polygons), np.diff(scene.polygon_offsets))
+    receiving = ~is_light[owner]
+    # one receiving polygon per vertex: the first one that uses it
+    vertices, first = np.unique(scene.polygon_vertex_ids[receiving], return_index=True)
+    receivers_of_vertex = owner[receiving][first]
+    chosen = rng.choice(len(vertices), size=min(views, len(vertices)), replace=False)
+    view_args = [(int(vertices[i]), int(rng.choice(lights)), int(receivers_of_vertex[i])) for i in chosen]
+    receivers = np.flatnonzero(~is_light)
+    sampled = rng.choice(receivers, size=min(pairs, len(receivers)), replace=False)
+    pair_args = [(int(rng.choice(lights)), int(r)) for r in sampled]
+    # the first calls may build per-skeleton indexes: warm them up outside the timings
+    skeleton.form_factor(*view_args[0])
+    skeleton.visible_boundary(*view_args[0][:2])
+    skeleton.discontinuities(*pair_args[0])
+    skeleton.blockers(*pair_args[0])
+    form_factor = _mean_ms(skeleton.form_factor, view_args)
+    boundary = _mean_ms(skeleton.visible_boundary, [a[:2] for a in view_args])
+    discontinuities = _mean_ms(skeleton.discontinuities, pair_args)
+    blockers = _mean_ms(skeleton.blockers, pair_args)
+    segments = [len(skeleton.discontinuities(*a)) for a in pair_args]
+    return {
+        "polygons": scene.n_polygons,
+        "views": len(view_args),
+        "pairs": len(pair_args),
+        "form_factor_ms": form_factor[0],
+        "form_factor_max_ms": form_factor[1],
+        "visible_boundary_ms": boundary[0],
+        "visible_boundary_max_ms": boundary[1],
+        "discontinuities_ms": discontinuities[0],
+        "discontinuities_max_ms": discontinuities[1],
+        "discontinuity_segments_mean": float(np.mean(segments)),
+        "blockers_ms": blockers[0],
+        "blockers_max_ms": blockers[1],
+        "paper_view_ms": "1.2-1.5",
+        "paper_discontinuities_ms": "1.3-28.6",
+        "paper_blockers_ms": 4.0,
+    }
+
+
+def _parse_sizes(text: str) -> list[int]:
+    try:
+        sizes = sorted({int(s) for s in text.split(",") if s.strip()})
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--sizes takes comma-separated integers, not {text!r}") from None
+    unknown = [s for s in sizes if s not in OFFICE_SIZES]
+    if unknown or not sizes:
+        raise argparse.ArgumentTypeError(f"office sizes are {', '.join(map(str, OFFICE_SIZES))}; got {text!r}")
+    return sizes
+
+
+def main(argv) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench skeleton", description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=_parse_sizes, default=list(OFFICE_SIZES),
+                        help="comma-separated office sizes (default: all seven of Table 1)")
+    parser.add_argument("--quick", action="store_true", help="only the first three sizes (84, 168, 312)")
+    parser.add_argument("--views", type=int, default=500, help="vertex views timed on the largest size")
+    parser.add_argument("--pairs", type=int, default=200, help="(light, receiver) pairs timed on the largest size")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--progress", action="store_true", help="print build progress to stderr")
+    args = parser.parse_args(argv)
+    sizes = list(OFFICE_SIZES[:3]) if args.quick else args.sizes
+
+    # imported here: `--help` works before (and without) the skeleton
+    try:
+        from core.skeleton import build_skeleton
+    except ImportError as error:
+        print(f"core.skeleton.build_skeleton is not available: {error}", file=sys.stderr)
+        return 2
+
+    started = time.perf_counter()
+    # the first build compiles the numba kernels (or loads them from numba's cache)
+    with Stopwatch() as warm_up:
+        build_skeleton(SCENES["cornell-box"]().build())
+    rows, largest = construction(build_skeleton, sizes, args.progress)
+    node_kinds = sorted({k for r in rows for k in r["nodes"]})
+    arc_kinds = sorted({k for r in rows for k in r["arcs"]})
+    table = []
+    for r in rows:
+        by_kind = {f"node {k}": r["nodes"].get(k, 0) for k in node_kinds}
+        by_kind.update({f"arc {k}": r["arcs"].get(k, 0) for k in arc_kinds})
+        table.append({**r, **by_kind})
+    print_table(
+        table,
+        ["polygons", "seconds", *[f"node {k}" for k in node_kinds], "nodes_total", *[f"arc {k}" for k in arc_kinds],
+         "arcs_total", "skeleton_mb", "peak_mb", "paper_seconds", "paper_mb", "paper_nodes_k", "paper_arcs_k",
+         "speed_up"],
+        title="Visibility Skeleton construction on the office family (paper: seed 003 Table 1, 195 MHz R10000)",
+    )
+    exponent = growth_exponent(rows)
+    print(f"growth of construction time: n^{exponent:.2f} (paper: n^2.4); numba warm-up {warm_up.seconds:.1f} s")
+
+    lazy = lazy_against_full(build_skeleton, largest, args.progress)
+    print()
+    print_table([lazy], ["polygons", "source", "lazy_seconds", "full_seconds", "speed_up", "lazy_nodes_total",
+                         "lazy_peak_mb", "paper_lazy_seconds", "paper_full_seconds"],
+                title="Lazy construction from one source (the first light) against the full build")
+    queries = query_costs(largest, args.views, args.pairs, args.seed)
+    print()
+    print_table([queries], ["polygons", "views", "form_factor_ms", "visible_boundary_ms", "pairs",
+                            "discontinuities_ms", "discontinuities_max_ms", "discontinuity_segments_mean",
+                            "blockers_ms", "paper_view_ms", "paper_discontinuities_ms", "paper_blockers_ms"],
+                title="Query costs on the largest skeleton")
+
+    targets = {
+        "speed_up_at_every_size": all(r["speed_up"] >= SPEED_UP_TARGET for r in rows),
+        "memory_at_1488": next((r["peak_mb"] <= MEMORY_TARGET_MB for r in rows if r["polygons"] == 1488), None),
+        "lazy_speed_up": lazy["speed_up"] >= LAZY_SPEED_UP_TARGET,
+    }
+    print()
+    print(f"targets (issue 3): >= {SPEED_UP_TARGET:.0f}x Table 1 at every size: {targets['speed_up_at_every_size']}; "
+          f"<= {MEMORY_TARGET_MB:.0f} MB at 1488: {targets['memory_at_1488']}; lazy >= {LAZY_SPEED_UP_TARGET:.0f}x "
+          f"full: {targets['lazy_speed_up']}")
+    print(f"process peak memory {peak_memory_bytes() / MB:.0f} MiB, total {time.perf_counter() - started:.1f} s")
+    write_results(
+        "skeleton", rows, growth_exponent=exponent, lazy=lazy, queries=queries, targets=targets,
+        warm_up_seconds=warm_up.seconds, paper_table_1=PAPER_TABLE_1, per_build_peak=_reset_peak(),
+    )
+    return 0
