@@ -1,14 +1,17 @@
 """Independent oracles for the Visibility Skeleton's queries (seed 003, sections 4.3 and 4.4).
 
-* `analytic_event_segments`: the EV and VE discontinuity lines that one convex box casts on a floor lit by a
-  convex light, from the geometry alone; `uncovered` / `same_segment_sets` compare segment sets as point sets
-  (the skeleton may split a trace at nodes where the oracle does not).
+* `analytic_events` / `analytic_event_segments`: the EV and VE discontinuity lines that one convex box casts
+  on a floor lit by a convex light, from the geometry alone, optionally hidden by extra occluders;
+  `face_plane_traces`: where a box face's plane cuts the light (face swaths, not EV / VE, yet the form
+  factor's derivative jumps there); `uncovered` / `same_segment_sets` compare segment sets as point sets (the
+  skeleton may split a trace at nodes where the oracle does not).
 * `blockers_by_removal`: whether taking a candidate (or its whole object) out of the blocker set changes a form
   factor source -> receiver (evidence from core.visibility.exact_form_factors, verified on its own).
 * `reaches`: whether some unoccluded segment from the source to the receiver touches a polygon, settled either
   way where possible: a witness segment, or an occluder that every such segment crosses.
 
-Plain numpy, every polygon tested, no BVH; nothing here imports core.skeleton, core.raycast or the view code.
+Plain numpy, every polygon tested, no BVH. The only core function used is exact_form_factors (by
+`blockers_by_removal`); nothing here imports core.skeleton or core.raycast.
 """
 
 from __future__ import annotations
