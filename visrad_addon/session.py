@@ -148,8 +148,9 @@ def _on_depsgraph_update(blender_scene, depsgraph) -> None:
     layout_changed = False
     for update in depsgraph.updates:
         datablock = update.id.original
-        # the add-on's own results change the depsgraph too, but conversion leaves them out
-        if datablock.get(ROLE_PROPERTY) is not None:
+        # the add-on's own results change the depsgraph too, but conversion leaves them out; a material's
+        # embedded node tree is reported with its material
+        if datablock.get(ROLE_PROPERTY) is not None or datablock.is_embedded_data:
             continue
         if _changes_conversion(datablock, update):
             session.dirty = True

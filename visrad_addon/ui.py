@@ -76,8 +76,8 @@ class VISRAD_PT_results(_VisRadPanel, bpy.types.Panel):
         meshes = sum(obj.get(ROLE_PROPERTY) == ROLE_RESULT_OBJECT for obj in objects)
         layout.label(text=f"{meshes} result meshes, {len(objects) - meshes} curve objects")
         column = layout.column(align=True)
-        column.label(text="Two-sided surfaces: each solved side is", icon="INFO")
-        column.label(text="its own faces, seen from its front only")
+        column.label(text="Two-sided surfaces: each solved side", icon="INFO")
+        column.label(text="gets faces of its own, facing its way")
         layout.operator("visrad.clear_results", icon="TRASH")
 
 

@@ -20,13 +20,15 @@ original object when that is moved later, and nothing depends on the original's 
 
 Sides. A result triangle carries the radiosity of the side it faces: its corners are counter-clockwise seen
 from that side (the hierarchy's triangles are counter-clockwise around their polygon's normal, the front).
-A polygon of a closed mesh has front triangles only (its back faces the inside and is never seen). An open
-surface is two-sided: when the solver writes both of its sides, the back side comes as a second set of
-triangles over the same polygon, wound the other way, on vertices of their own. The result mesh keeps both
-sets as coincident faces. Faces of a polygon written on both sides use the material "VisRad Radiance (front
-only)", which shows a face only from its front (transparent from behind in Cycles, back-face culled in EEVEE
-and the viewport), so each side of the surface shows its own radiosity; faces of a polygon written on one side
-only use "VisRad Radiance", visible from both sides with that side's values.
+A polygon of a closed mesh has front triangles only (its back faces the inside and is never seen); so may an
+open surface whose back side was not solved, and its faces then show that side's values from both sides. An
+open surface solved on both sides comes with a second set of triangles over the same polygon, wound the other
+way, on vertices of their own. The result mesh keeps both sets as faces facing away from each other, the
+back side's moved behind the front by SIDE_GAP x the scene's diagonal (0.1 mm in a 10 m room), so that
+whichever side a ray or the viewport looks at, the nearest face is that side's: renderers need no
+transparency trick (coincident faces would leave it to chance which one is hit). Faces of surfaces written on
+both sides use the material "VisRad Radiance (front only)", with back-face culling for EEVEE and the
+viewport, whose depth buffers cannot separate such a small gap; Cycles needs no culling.
 
 Rendering. Result objects are visible to camera rays only (not to diffuse, glossy, transmission, volume or
 shadow rays): the bake already contains the lighting, and emitting it into the scene again would count it
@@ -58,6 +60,9 @@ RESULT_SUFFIX = ".visrad"
 DISCONTINUITY_SUFFIX = ".visrad_discontinuities"
 RADIANCE_MATERIAL = "VisRad Radiance"
 FRONT_ONLY_MATERIAL = "VisRad Radiance (front only)"
+# How far behind the front faces the back side of a surface written on both sides is put, relative to the
+# scene's bounding-box diagonal: far above float32 resolution (1e-7 relative), far below what can be seen.
+SIDE_GAP = 1e-5
 
 # Custom properties that mark what the add-on owns, so that only those datablocks are ever removed.
 ROLE_PROPERTY = "visrad_role"
@@ -282,20 +287,32 @@ def _result_object(source, checked: _Checked, scene, triangle_ids: np.ndarray, m
     used, corners = np.unique(triangles, return_inverse=True)
     corners = corners.reshape(-1, 3)
     name = f"{source.name}{RESULT_SUFFIX}"
+    positions = checked.vertices[used].copy()
+    back, both_sides = _sides(checked.vertices, triangles, polygons, scene.normals)
+    moved = back & both_sides
+    if moved.any():
+        shared = np.intersect1d(corners[moved], corners[~moved])
+        if len(shared):
+            raise ValueError(
+                f"result vertex {used[shared[0]]} is used by triangles of both sides of a surface: each side "
+                "needs vertices of its own"
+            )
+        direction = np.zeros_like(positions)
+        direction[corners[moved].ravel()] = np.repeat(scene.normals[polygons[moved]], 3, axis=0)
+        positions -= SIDE_GAP * scene.diagonal * direction
 
     mesh = _named(bpy.data.meshes.new(name), name, ROLE_RESULT_OBJECT, built)
     mesh.vertices.add(len(used))
-    mesh.vertices.foreach_set("co", checked.vertices[used].astype(np.float32).ravel())
+    mesh.vertices.foreach_set("co", positions.astype(np.float32).ravel())
     mesh.loops.add(3 * len(corners))
     mesh.loops.foreach_set("vertex_index", corners.astype(np.int32).ravel())
     mesh.polygons.add(len(corners))
     mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(corners), 3, dtype=np.int32))
 
-    front_only = _both_sides_written(checked.vertices, triangles, polygons, scene.normals)
     mesh.materials.append(materials.radiance)
-    if front_only.any():
+    if both_sides.any():
         mesh.materials.append(materials.front_only)
-        mesh.polygons.foreach_set("material_index", front_only.astype(np.int32))
+        mesh.polygons.foreach_set("material_index", both_sides.astype(np.int32))
     mesh.update(calc_edges=True)
 
     radiance = np.ones((len(used), 4), dtype=np.float32)
@@ -312,14 +329,15 @@ def _result_object(source, checked: _Checked, scene, triangle_ids: np.ndarray, m
     return obj
 
 
-def _both_sides_written(vertices, triangles, polygons, normals) -> np.ndarray:
-    """(T,) bool: the triangle's polygon has triangles facing both ways (both sides were written)."""
+def _sides(vertices, triangles, polygons, normals) -> tuple[np.ndarray, np.ndarray]:
+    """(back (T,) bool: the triangle faces against its polygon's normal, both_sides (T,) bool: its polygon has
+    triangles facing both ways)."""
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
     back = np.einsum("ij,ij->i", np.cross(b - a, c - a), normals[polygons]) < 0.0
     count = int(polygons.max()) + 1
     has_front = np.bincount(polygons[~back], minlength=count) > 0
     has_back = np.bincount(polygons[back], minlength=count) > 0
-    return (has_front & has_back)[polygons]
+    return back, (has_front & has_back)[polygons]
 
 
 def _curve_object(source, segments: np.ndarray, built: list):
@@ -365,33 +383,24 @@ class _Materials:
 
 
 def _radiance_material(name: str, front_only: bool, built: list):
-    """Emission of strength 1 coloured by the radiance attribute; with front_only, transparent from behind."""
+    """Emission of strength 1 coloured by the radiance attribute; with front_only, back faces are culled in
+    EEVEE and the viewport."""
     material = _named(bpy.data.materials.new(name), name, ROLE_MATERIAL, built)
     if bpy.app.version < (5, 0, 0):
         # node trees are always used from Blender 5.0 on, where the switch is deprecated
         material.use_nodes = True
     tree = material.node_tree
     tree.nodes.clear()
-    output = tree.nodes.new("ShaderNodeOutputMaterial")
     attribute = tree.nodes.new("ShaderNodeAttribute")
     attribute.attribute_type = "GEOMETRY"
     attribute.attribute_name = RADIANCE_ATTRIBUTE
     emission = tree.nodes.new("ShaderNodeEmission")
     emission.inputs["Strength"].default_value = 1.0
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
     tree.links.new(attribute.outputs["Color"], emission.inputs["Color"])
-    attribute.location, emission.location, output.location = (-400, 0), (-150, 0), (300, 0)
-    if not front_only:
-        tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
-        return material
-    geometry = tree.nodes.new("ShaderNodeNewGeometry")
-    transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
-    mix = tree.nodes.new("ShaderNodeMixShader")
-    tree.links.new(geometry.outputs["Backfacing"], mix.inputs["Fac"])
-    tree.links.new(emission.outputs["Emission"], mix.inputs[1])
-    tree.links.new(transparent.outputs["BSDF"], mix.inputs[2])
-    tree.links.new(mix.outputs["Shader"], output.inputs["Surface"])
-    geometry.location, transparent.location, mix.location = (-150, 250), (-150, -150), (100, 0)
-    material.use_backface_culling = True
+    tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    attribute.location, emission.location, output.location = (-400, 0), (-150, 0), (100, 0)
+    material.use_backface_culling = front_only
     return material
 
 

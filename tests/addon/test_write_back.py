@@ -25,6 +25,7 @@ from visrad.visrad_addon.write_back import (  # noqa: E402
     RADIANCE_MATERIAL,
     RESULTS_COLLECTION,
     ROLE_PROPERTY,
+    SIDE_GAP,
     ResultArrays,
     clear_results,
     write_results,
@@ -38,13 +39,14 @@ PANEL_X = 0.3
 
 @pytest.fixture
 def lit():
-    """(core Scene, SourceMap, result) of the light / box / panel scene, freshly built in an empty file."""
+    """(core Scene, SourceMap, result, first back-side vertex id) of the light / box / panel scene, freshly
+    built in an empty file."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     area_light("Light", size=1.0, power=100.0, location=(0.0, 0.0, 2.0))
     box("Box", BOX_LOW, BOX_HIGH, diffuse_material("grey", (0.5, 0.5, 0.5)))
     grid("Panel", (PANEL_X, -0.5, 0.2), (0, 1, 0), (0, 0, 1), 1, diffuse_material("warm", (0.8, 0.6, 0.4)))
     scene, source_map = scene_from_blender(bpy.context)
-    return scene, source_map, direct_light_result(scene)
+    return scene, source_map, *direct_light_result(scene)
 
 
 def direct_light(scene, points, normals, polygons) -> np.ndarray:
@@ -57,7 +59,8 @@ def direct_light(scene, points, normals, polygons) -> np.ndarray:
     return radiosity
 
 
-def direct_light_result(scene) -> ResultArrays:
+def direct_light_result(scene) -> tuple[ResultArrays, int]:
+    """The result, and the id of its first back-side vertex (back-side vertices come after the front's)."""
     hierarchy = Hierarchy.from_scene(scene)
     hierarchy.queue_regular_grid(hierarchy.leaves())
     hierarchy.complete_step()
@@ -80,13 +83,14 @@ def direct_light_result(scene) -> ResultArrays:
         panel_polygon: np.array([[corners[0], corners[2]], [corners[1], corners[3]], [corners[0], corners[1]]]),
         box_top: np.array([[top[0], top[2]], [0.5 * (top[0] + top[1]), 0.5 * (top[2] + top[3])]]),
     }
-    return ResultArrays(
+    result = ResultArrays(
         vertices=np.concatenate([vertices, vertices[back_vertices]]),
         triangles=np.concatenate([triangles, renumber[triangles[two_sided]][:, ::-1]]),
         triangle_polygon=np.concatenate([polygons, polygons[two_sided]]),
         radiosity=np.concatenate([radiosity, back_radiosity]),
         discontinuities=discontinuities,
     )
+    return result, len(vertices)
 
 
 def expected_part(result, scene, source_map, name: str):
@@ -130,7 +134,7 @@ def all_datablocks() -> set[str]:
 
 
 def test_radiance_times_pi_is_the_given_radiosity_on_the_right_objects(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     summary = write_results(bpy.context.scene, result, scene, source_map)
 
     collection = bpy.data.collections[RESULTS_COLLECTION]
@@ -147,7 +151,10 @@ def test_radiance_times_pi_is_the_given_radiosity_on_the_right_objects(lit):
         assert (attribute.data_type, attribute.domain) == ("FLOAT_COLOR", "POINT")
         assert mesh.color_attributes.active_color_name == RADIANCE_ATTRIBUTE
         assert mesh.color_attributes[mesh.color_attributes.render_color_index].name == RADIANCE_ATTRIBUTE
-        np.testing.assert_array_equal(positions, result.vertices[used].astype(np.float32))
+        # the back side of the two-sided panel lies SIDE_GAP x the diagonal behind its front
+        expected_positions = result.vertices[used].copy()
+        expected_positions[used >= first_back, 0] -= SIDE_GAP * scene.diagonal
+        np.testing.assert_allclose(positions, expected_positions, rtol=0, atol=1e-6)
         assert canonical(loops) == canonical(faces)
         expected = result.radiosity[used]
         np.testing.assert_allclose(radiance[:, :3] * math.pi, expected, rtol=1e-6, atol=1e-6 * expected.max())
@@ -160,12 +167,12 @@ def test_radiance_times_pi_is_the_given_radiosity_on_the_right_objects(lit):
     box_positions = mesh_arrays(bpy.data.objects["Box.visrad"].data)[0]
     assert (box_positions >= np.array(BOX_LOW) - 1e-6).all() and (box_positions <= np.array(BOX_HIGH) + 1e-6).all()
     panel_positions = mesh_arrays(bpy.data.objects["Panel.visrad"].data)[0]
-    np.testing.assert_allclose(panel_positions[:, 0], PANEL_X, atol=1e-6)
+    np.testing.assert_allclose(panel_positions[:, 0], PANEL_X, atol=2 * SIDE_GAP * scene.diagonal)
     assert result.radiosity[:, 0].max() > 0.0
 
 
 def test_each_side_of_the_open_panel_is_written_and_shown_from_its_front(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     write_results(bpy.context.scene, result, scene, source_map)
     panel = bpy.data.objects["Panel.visrad"].data
     positions, loops, radiance, normals = mesh_arrays(panel)
@@ -187,34 +194,26 @@ def test_each_side_of_the_open_panel_is_written_and_shown_from_its_front(lit):
         )
     assert np.abs(radiance[front_vertices].sum(axis=0) - radiance[back_vertices].sum(axis=0)).max() > 0.01
 
-    front_only = bpy.data.materials[FRONT_ONLY_MATERIAL]
+    # the panel's faces (written on both sides) are culled from behind in EEVEE; the box's never are
     assert [m.name for m in panel.materials] == [RADIANCE_MATERIAL, FRONT_ONLY_MATERIAL]
     material_index = np.empty(len(panel.polygons), dtype=np.int32)
     panel.polygons.foreach_get("material_index", material_index)
     np.testing.assert_array_equal(material_index, 1)
-    assert front_only.use_backface_culling
-    links = {
-        (link.from_node.bl_idname, link.from_socket.identifier, link.to_node.bl_idname, link.to_socket.identifier)
-        for link in front_only.node_tree.links
-    }
-    assert ("ShaderNodeNewGeometry", "Backfacing", "ShaderNodeMixShader", "Fac") in links
-    # the mix shows its second shader (identifier Shader_001) where Fac = 1: transparent from behind
-    assert ("ShaderNodeEmission", "Emission", "ShaderNodeMixShader", "Shader") in links
-    assert ("ShaderNodeBsdfTransparent", "BSDF", "ShaderNodeMixShader", "Shader_001") in links
-
     box_mesh = bpy.data.objects["Box.visrad"].data
     assert [m.name for m in box_mesh.materials] == [RADIANCE_MATERIAL]
-    radiance_material = bpy.data.materials[RADIANCE_MATERIAL]
-    emission = next(n for n in radiance_material.node_tree.nodes if n.bl_idname == "ShaderNodeEmission")
-    attribute = emission.inputs["Color"].links[0].from_node
-    assert emission.inputs["Strength"].default_value == 1.0
-    assert (attribute.bl_idname, attribute.attribute_name) == ("ShaderNodeAttribute", RADIANCE_ATTRIBUTE)
-    output = next(n for n in radiance_material.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    assert output.inputs["Surface"].links[0].from_node == emission
+    for name, culled in ((RADIANCE_MATERIAL, False), (FRONT_ONLY_MATERIAL, True)):
+        material = bpy.data.materials[name]
+        assert material.use_backface_culling == culled
+        emission = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeEmission")
+        attribute = emission.inputs["Color"].links[0].from_node
+        assert emission.inputs["Strength"].default_value == 1.0
+        assert (attribute.bl_idname, attribute.attribute_name) == ("ShaderNodeAttribute", RADIANCE_ATTRIBUTE)
+        output = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+        assert output.inputs["Surface"].links[0].from_node == emission
 
 
 def test_discontinuity_segments_become_poly_splines_per_receiver(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     summary = write_results(bpy.context.scene, result, scene, source_map)
     collection = bpy.data.collections[DISCONTINUITIES_COLLECTION]
     assert sorted(obj.name for obj in collection.objects) == [
@@ -232,7 +231,7 @@ def test_discontinuity_segments_become_poly_splines_per_receiver(lit):
 
 
 def test_results_are_left_out_of_the_next_conversion(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     before = fingerprint(scene, source_map, {})
     write_results(bpy.context.scene, result, scene, source_map)
     again, again_map = scene_from_blender(bpy.context)
@@ -240,7 +239,7 @@ def test_results_are_left_out_of_the_next_conversion(lit):
 
 
 def test_the_users_data_is_never_modified(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     before = user_data_fingerprint(ROLE_PROPERTY)
     assert user_data_fingerprint(ROLE_PROPERTY) == before
     write_results(bpy.context.scene, result, scene, source_map)
@@ -269,7 +268,7 @@ def radiance_of(name: str) -> np.ndarray:
 
 @pytest.mark.parametrize("failing", ["_result_object", "_curve_object"])
 def test_a_failed_rewrite_keeps_the_previous_results(lit, monkeypatch, failing):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     write_results(bpy.context.scene, result, scene, source_map)
     previous = {name: radiance_of(name) for name in ("Box.visrad", "Panel.visrad")}
     datablocks = all_datablocks()
@@ -292,7 +291,7 @@ def test_a_failed_rewrite_keeps_the_previous_results(lit, monkeypatch, failing):
 
 
 def test_a_rewrite_replaces_the_previous_results(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     write_results(bpy.context.scene, result, scene, source_map)
     first = all_datablocks()
     summary = write_results(bpy.context.scene, brighter(result, 2.0), scene, source_map)
@@ -308,7 +307,7 @@ def test_a_rewrite_replaces_the_previous_results(lit):
 
 
 def test_malformed_results_are_refused_by_name_and_change_nothing(lit):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     datablocks = all_datablocks()
     radiosity = result.radiosity.copy()
     radiosity[7, 1] = np.nan
@@ -320,11 +319,22 @@ def test_malformed_results_are_refused_by_name_and_change_nothing(lit):
     other = ResultArrays(result.vertices, result.triangles, polygons, result.radiosity)
     with pytest.raises(ValueError, match=r"triangle_polygon\[3\].*another scene"):
         write_results(bpy.context.scene, other, scene, source_map)
+    # the panel's back side on the front side's vertices
+    front = (result.triangles < first_back).all(axis=1)
+    panel = front & scene.two_sided[result.triangle_polygon]
+    shared = ResultArrays(
+        result.vertices,
+        np.concatenate([result.triangles[front], result.triangles[panel][:, ::-1]]),
+        np.concatenate([result.triangle_polygon[front], result.triangle_polygon[panel]]),
+        result.radiosity,
+    )
+    with pytest.raises(ValueError, match="used by triangles of both sides of a surface"):
+        write_results(bpy.context.scene, shared, scene, source_map)
     assert all_datablocks() == datablocks
 
 
 def test_clear_results_operator_removes_every_result_datablock(lit, registered_addon):
-    scene, source_map, result = lit
+    scene, source_map, result, first_back = lit
     assert not bpy.ops.visrad.clear_results.poll()
     before = all_datablocks()
     write_results(bpy.context.scene, result, scene, source_map)
@@ -334,3 +344,44 @@ def test_clear_results_operator_removes_every_result_datablock(lit, registered_a
     assert all_datablocks() == before
     assert not any(c.get(ROLE_PROPERTY) for c in bpy.context.scene.collection.children)
     assert "UNDO" in bpy.types.VISRAD_OT_clear_results.bl_options
+
+
+def test_cycles_renders_each_side_of_a_two_sided_result_with_its_own_radiance(tmp_path):
+    """The materials render the bake: an orthographic camera sees exactly the front side's radiance from the
+    front and the back side's from behind (the back side's faces lie just behind the front's)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    panel = grid("Panel", (0.0, -0.5, -0.5), (0, 1, 0), (0, 0, 1), 1)
+    light = area_light("Light", size=0.5, power=10.0, location=(0.0, 0.0, 2.0))
+    scene, source_map = scene_from_blender(bpy.context)
+    (polygon,) = np.flatnonzero(scene.two_sided)
+    corners = scene.polygon(polygon)
+    front, back = np.array([0.2, 0.4, 0.6]), np.array([0.9, 0.1, 0.3])
+    result = ResultArrays(
+        vertices=np.concatenate([corners, corners]),
+        triangles=np.array([[0, 1, 2], [0, 2, 3], [6, 5, 4], [7, 6, 4]]),
+        triangle_polygon=np.full(4, polygon),
+        radiosity=math.pi * np.repeat([front, back], 4, axis=0),
+    )
+    write_results(bpy.context.scene, result, scene, source_map)
+    panel.hide_render = light.hide_render = True
+
+    render_scene = bpy.context.scene
+    render_scene.render.engine = "CYCLES"
+    # every camera ray sees the emission it renders, noise-free: the denoiser could only blur it
+    render_scene.cycles.samples, render_scene.cycles.device, render_scene.cycles.use_denoising = 4, "CPU", False
+    render_scene.render.resolution_x = render_scene.render.resolution_y = 4
+    render_scene.render.image_settings.file_format = "OPEN_EXR"
+    render_scene.view_settings.view_transform = "Standard"
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.data.type, camera.data.ortho_scale = "ORTHO", 0.5
+    render_scene.collection.objects.link(camera)
+    render_scene.camera = camera
+    for side, x, expected in (("front", 3.0, front), ("back", -3.0, back)):
+        camera.location = (x, 0.0, 0.0)
+        camera.rotation_euler = (math.pi / 2, 0.0, math.pi / 2 if x > 0 else -math.pi / 2)
+        path = tmp_path / f"{side}.exr"
+        render_scene.render.filepath = str(path)
+        bpy.ops.render.render(write_still=True)
+        image = bpy.data.images.load(str(path))
+        pixels = np.array(image.pixels[:]).reshape(-1, 4)[:, :3]
+        np.testing.assert_allclose(pixels, np.tile(expected, (len(pixels), 1)), rtol=1e-4, err_msg=side)
