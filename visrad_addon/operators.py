@@ -56,12 +56,4 @@ class VISRAD_OT_clear_results(bpy.types.Operator):
 
 classes = (VISRAD_OT_check_scene, VISRAD_OT_clear_results)
 
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -83,12 +83,4 @@ class VISRAD_PT_results(_VisRadPanel, bpy.types.Panel):
 
 classes = (VISRAD_PT_main, VISRAD_PT_scene, VISRAD_PT_results)
 
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
