@@ -9,9 +9,9 @@ from visrad.core.errors import SceneError  # noqa: E402
 from visrad.visrad_addon import numba_cache  # noqa: E402
 from visrad.visrad_addon.properties import solver_settings  # noqa: E402
 from visrad.visrad_addon.session import SessionStore, store  # noqa: E402
-from visrad.visrad_addon.write_back import ResultArrays, write_results  # noqa: E402
+from visrad.visrad_addon.write_back import ROLE_PROPERTY, ResultArrays, write_results  # noqa: E402
 
-from tests.addon.blender_scenes import area_light, box, diffuse_material, grid  # noqa: E402
+from tests.addon.blender_scenes import area_light, box, diffuse_material, grid, user_data_fingerprint  # noqa: E402
 
 SETTINGS = {"jnd": 0.02, "max_iterations": 10, "max_bounces": None, "form_factors": "exact", "preset": "accurate"}
 
@@ -154,3 +154,43 @@ def test_core_kernels_of_the_addon_cache_apart_from_the_plain_core_package():
     expected = numba_cache.CHECKOUT_ROOT / "__pycache__" / "numba" / "visrad"
     assert all(path.startswith(str(expected)) for path in cache_dirs(ours))
     assert cache_dirs(plain) == {str(numba_cache.CHECKOUT_ROOT / "core" / "__pycache__")}
+
+
+def _remove_light():
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+
+
+def _remove_meshes():
+    for name in ("Box", "Floor"):
+        bpy.data.objects.remove(bpy.data.objects[name])
+
+
+def _collapse_a_face():
+    vertices = bpy.data.meshes["Floor"].vertices
+    vertices[1].co = vertices[0].co
+    vertices[4].co = vertices[0].co
+
+
+def _nan_transform():
+    bpy.data.objects["Box"].location = (float("nan"), 0.0, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (_remove_light, "has no light"),
+        (_remove_meshes, "has no visible mesh"),
+        (_collapse_a_face, 'polygon 0 of mesh "Floor"'),
+        (_nan_transform, 'object "Box" has a non-finite world transform'),
+    ],
+    ids=["no light", "no mesh", "zero-area face", "NaN transform"],
+)
+def test_check_scene_reports_a_bad_scene_by_name_and_changes_nothing(small_scene, damage, message):
+    damage()
+    # Blender derives matrix_world and the like when it evaluates the scene, which conversion does
+    bpy.context.view_layer.update()
+    before = user_data_fingerprint(ROLE_PROPERTY)
+    with pytest.raises(RuntimeError, match=message):
+        bpy.ops.visrad.check_scene()
+    assert user_data_fingerprint(ROLE_PROPERTY) == before
+    assert store.get(bpy.context.scene) is None
