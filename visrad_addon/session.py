@@ -9,8 +9,9 @@ A session is valid for one *fingerprint*: a hash of the converted Scene's arrays
 reflectance, emission, sides, object ids), the names of the converted objects and the solver settings. Any
 change of geometry, transforms, materials, lights, exclusion or settings changes it. `SessionStore.open`
 converts the scene, compares fingerprints and returns the existing session only when they are equal, else a
-fresh one: stale state can never be used. The depsgraph handler only marks sessions `dirty` (cheap), which
-the panel shows as "out of date" without converting the scene at every redraw.
+fresh one: stale state can never be used (also after an undo). The depsgraph handler only marks sessions
+`dirty` (cheap), which the panel shows ("The scene changed since the check") without converting the scene at
+every redraw.
 """
 
 from __future__ import annotations
