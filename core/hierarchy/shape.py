@@ -1,11 +1,12 @@
 """Where a free point goes so that the triangles around it stay well shaped (seed 000 section 3.1).
 
-A free point is a sample whose exact position does not matter (a refinement point inserted without a grid);
-segment ends, segment crossings and light maxima inserted with a grid are never moved. Inside an element's
-constrained Delaunay triangulation a free point is joined to the element's ring (its corners and the points
-already on its sides), whose pieces are constraints: a point in the thin wedge along a piece makes a
-triangle with a tiny angle there whatever the triangulation does. Such a point is moved onto the piece
-(where matching shares it with the neighbour) or onto the piece's nearer end.
+A free point is a sample whose exact position does not matter (a point inserted without a grid); segment ends,
+segment crossings and light maxima inserted with a grid are never moved. In an element's constrained Delaunay
+triangulation a free point is joined to the element's ring (its corners and the points already on its sides),
+whose pieces are constraints: near a piece it makes a triangle with a tiny angle whatever the triangulation
+does. The hierarchy therefore scores each place a free point could go by the smallest angle of the fan it
+would make with the rings it joins (the element's, and the neighbour's when it lands on a side, which
+matching then splits), and keeps the point, moves it onto a nearby side, or merges it with a vertex.
 """
 
 import math
@@ -16,13 +17,14 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ShapeSettings:
-    """How far free points move to keep triangles well shaped; both are ratios, hence scale-free.
+    """How free points are placed to keep triangles well shaped; both are ratios, hence scale-free.
 
-    snap_angle_degrees: a free point that would make, with a ring piece, a triangle whose angle at the piece's
-        end is below this lies in that piece's thin wedge and is moved onto the piece. 0 keeps every point.
-    merge_fraction: a point moved onto a piece lands on the piece's nearer end when it would be within this
-        fraction of the piece's length from it (a side point there would make slivers on both sides); two
-        free points closer than this fraction of their distance to the ring are one point.
+    snap_angle_degrees: a free point stays where it is if its fan keeps every angle at least this large, else
+        it moves onto the nearby side piece whose fans (in the element and across) do; 0 keeps every point.
+    merge_fraction: when no place reaches the snap angle, a point this close to a vertex of its element,
+        relative to the element's longest side, merges with it; further away it takes its best place (the
+        element's shape forces a thin triangle there). Two free points of one element closer than this
+        fraction of their distance to the element's ring are one point.
     """
 
     snap_angle_degrees: float = 10.0
@@ -32,36 +34,36 @@ class ShapeSettings:
     def enabled(self) -> bool:
         return self.snap_angle_degrees > 0.0
 
-    @property
-    def wedge_slope(self) -> float:
-        """tan(snap angle): the width of a piece's thin wedge per unit of distance along the piece."""
-        return math.tan(math.radians(self.snap_angle_degrees))
 
+def piece_feet(point: np.ndarray, ring_xy: np.ndarray) -> tuple:
+    """Closest points of the pieces ring_xy[i] -> ring_xy[i + 1] of a closed ring (n, 2) to point (2,).
 
-def wedge_target(point: np.ndarray, ring_xy: np.ndarray, settings: ShapeSettings, snap: float) -> tuple:
-    """Where free `point` (2,) goes among the pieces ring_xy[i] -> ring_xy[i + 1] of a convex ring (n, 2).
-
-    A point within `snap` (the length tolerance's snapping distance) of a piece is always on it. Returns
-    ("vertex", i): ring vertex i; ("piece", i, s): the point at parameter s in (0, 1) of piece i; ("free",):
-    the point stays where it is.
+    Returns (s, distance, length): the parameter in [0, 1] of the closest point along each piece, the distance
+    to it and the piece's length, each (n,) float64.
     """
-    u = ring_xy
-    w = np.roll(ring_xy, -1, axis=0)
-    e = w - u
+    e = np.roll(ring_xy, -1, axis=0) - ring_xy
     length = np.sqrt(np.einsum("ij,ij->i", e, e))
-    s = np.clip(np.einsum("ij,ij->i", point - u, e) / (length * length), 0.0, 1.0)
-    foot = u + s[:, None] * e
-    d = np.hypot(*(point - foot).T)
-    along_u = s * length
-    along_w = length - along_u
-    # The smaller of the triangle's angles at the two ends is at the end further from the foot.
-    thin = (d < settings.wedge_slope * np.maximum(along_u, along_w)) | (d <= snap)
-    if not thin.any():
-        return ("free",)
-    i = int(np.argmin(np.where(thin, d, np.inf)))
-    reach = max(settings.merge_fraction * length[i], snap)
-    if along_u[i] <= reach and along_u[i] <= along_w[i]:
-        return ("vertex", i)
-    if along_w[i] <= reach:
-        return ("vertex", (i + 1) % len(ring_xy))
-    return ("piece", i, float(s[i]))
+    s = np.clip(np.einsum("ij,ij->i", point - ring_xy, e) / (length * length), 0.0, 1.0)
+    foot = ring_xy + s[:, None] * e
+    return s, np.hypot(*(point - foot).T), length
+
+
+def fan_min_angle(apex: np.ndarray, ring_xy: np.ndarray, flat: float) -> float:
+    """Smallest angle, in degrees, of the triangles apex, ring[i], ring[i + 1] over a closed ring (n, 2).
+
+    Pieces the apex lies on, or lies within `flat` of the line of, make no triangle (the apex is on that side)
+    and are left out. Returns 180 when no triangle is left.
+    """
+    u = ring_xy - apex
+    w = np.roll(ring_xy, -1, axis=0) - apex
+    e = w - u
+    cross = np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
+    length = np.sqrt(np.einsum("ij,ij->i", e, e))
+    real = cross > flat * length
+    if not real.any():
+        return 180.0
+    u, w, e, cross = u[real], w[real], e[real], cross[real]
+    at_apex = np.arctan2(cross, np.einsum("ij,ij->i", u, w))
+    at_u = np.arctan2(cross, -np.einsum("ij,ij->i", u, e))
+    at_w = np.arctan2(cross, np.einsum("ij,ij->i", w, e))
+    return math.degrees(float(min(at_apex.min(), at_u.min(), at_w.min())))

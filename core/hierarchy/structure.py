@@ -23,7 +23,7 @@ from .geometry import (
     side_parameters,
 )
 from .grid import GridSettings, interior_grid_points, side_grid_parameters
-from .shape import ShapeSettings, wedge_target
+from .shape import ShapeSettings, fan_min_angle, piece_feet
 
 # The triangulation works on integers, 1/1024 of the length tolerance: points further apart than the
 # tolerance never share a cell, needles a few tolerances wide keep their shape, and coordinates stay far
@@ -318,11 +318,15 @@ class HierarchyCore:
         side_vectors = side_b - side_a
         side_lengths = np.sqrt(np.einsum("ij,ij->i", side_vectors, side_vectors))
 
-        # Points inserted with a grid (light maxima) stay put and the grid avoids them; without one they
-        # are free samples, moved where their triangles stay well shaped.
-        free = points if step is None and self.shape.enabled else _NO_POINTS
-        if len(free):
-            points = _NO_POINTS
+        # Points inserted with a grid (light maxima) stay put and the grid avoids them, and so do points given
+        # on a side (matching them is the point, Fig. 6); the others are free samples, moved where their
+        # triangles stay well shaped.
+        free = _NO_POINTS
+        if step is None and self.shape.enabled and len(points):
+            inside = cross2(side_vectors, points[:, None, :] - side_a) / side_lengths
+            interior = inside.min(axis=1) > snap
+            free = points[interior]
+            points = points[~interior]
         features = np.concatenate([points, segments.reshape(-1, 2)]) if len(segments) else points
         feature_vertex = np.full(len(features), -1, dtype=np.int64)
         interior_xy = _NO_POINTS
@@ -351,8 +355,7 @@ class HierarchyCore:
             interior_kind = np.full(len(unique_xy), POINT, dtype=np.int8)
             np.maximum.at(interior_kind, representative, np.where(interior < len(points), POINT, SEGMENT))
         if len(free):
-            inside = cross2(side_vectors, free[:, None, :] - side_a) / side_lengths
-            placed = self._place_free_points(free[inside.min(axis=1) >= -snap], hedges, forward, interior_xy)
+            placed = self._place_free_points(element, free, interior_xy)
             interior_xy = np.concatenate([interior_xy, placed])
             interior_kind = np.concatenate([interior_kind, np.full(len(placed), POINT, dtype=np.int8)])
 
@@ -445,39 +448,68 @@ class HierarchyCore:
         )
         return True
 
-    def _place_free_points(self, points: np.ndarray, hedges: list, forward: list, interior_xy: np.ndarray
-                           ) -> np.ndarray:
-        """Place free points (M, 2) of an element one by one (shape.wedge_target): onto a ring vertex, onto a
-        ring piece (splitting its HEdge, so that the neighbour is anchored), or inside, unless an interior
-        point (I, 2) already there is closer than the merge fraction of its distance to the ring.
-        Returns the free points kept inside (K, 2)."""
-        snap = self.tol.snap
+    def _ring(self, element: int) -> tuple:
+        """The element's ring: its corners and the points on its sides, counter-clockwise, with the leaf
+        sub-HEdge starting at each: (vertices, hedges), two lists of ints."""
+        corners, hedges = self._sides(element)
         ring, ring_hedges = [], []
-        for s in range(len(hedges)):
-            chain, leaves = self._chain(hedges[s], forward[s])
+        for corner, hedge in zip(corners, hedges, strict=True):
+            chain, leaves = self._chain(int(hedge), self._he_a[hedge] == corner)
             ring.extend(chain)
             ring_hedges.extend(leaves)
+        return ring, ring_hedges
+
+    def _leaves_across(self, hedge: int, element: int) -> list:
+        """Leaves other than `element` whose side is leaf HEdge `hedge` or an HEdge containing it."""
+        found = []
+        while hedge >= 0:
+            found.extend(e for e in self._he_elements[hedge] if e != element and self._e_child_count.buf[e] == 0)
+            hedge = self._he_parent[hedge]
+        return found
+
+    def _place_free_points(self, element: int, points: np.ndarray, interior_xy: np.ndarray) -> np.ndarray:
+        """Place free points (M, 2) of leaf `element` one by one (see shape.py). A point stays inside if its
+        fan keeps the snap angle; else it moves to the foot, on one of the two nearest ring pieces, whose fans
+        in this element and in the leaves across keep it best, splitting that piece's HEdge (matching: the
+        leaves across are anchored). When neither reaches the snap angle, a point near a vertex merges with
+        it and one further away takes its best place. A kept point within the merge fraction of its distance
+        to the ring from an interior point (I, 2) merges with it. Returns the points kept inside (K, 2)."""
+        snap = self.tol.snap
+        angle = self.shape.snap_angle_degrees
+        ring, ring_hedges = self._ring(element)
+        corners_xy = self._xy.buf[self._sides(element)[0]]
+        longest = float(np.hypot(*(np.roll(corners_xy, -1, axis=0) - corners_xy).T).max())
         kept = [interior_xy]
         already = len(interior_xy)
         for p in points:
             ring_xy = self._xy.buf[ring]
-            target = wedge_target(p, ring_xy, self.shape, snap)
-            if target[0] == "vertex":
+            s, distance, length = piece_feet(p, ring_xy)
+            gaps = np.hypot(*(ring_xy - p).T)
+            options = []
+            if distance.min() > snap:
+                options.append((fan_min_angle(p, ring_xy, snap), -1))
+            for i in np.argsort(distance)[:2].tolist():
+                if min(s[i], 1.0 - s[i]) * length[i] <= snap:
+                    continue
+                foot = ring_xy[i] + s[i] * (ring_xy[(i + 1) % len(ring)] - ring_xy[i])
+                quality = fan_min_angle(foot, ring_xy, snap)
+                for other in self._leaves_across(ring_hedges[i], element):
+                    quality = min(quality, fan_min_angle(foot, self._xy.buf[self._ring(other)[0]], snap))
+                options.append((quality, i))
+            best_quality, best = max(options, default=(0.0, -2))
+            if best == -2 or (best_quality < angle and gaps.min() <= max(self.shape.merge_fraction * longest, snap)):
                 continue
-            if target[0] == "piece":
-                i, s = target[1], target[2]
-                h = ring_hedges[i]
-                along = self._he_a[h] == ring[i]
-                vertex = self._split_leaf(h, s if along else 1.0 - s, POINT)
+            if best >= 0:
+                h = ring_hedges[best]
+                along = self._he_a[h] == ring[best]
+                vertex = self._split_leaf(h, s[best] if along else 1.0 - s[best], POINT)
                 first, second = self._he_kids[h]
-                ring.insert(i + 1, vertex)
-                ring_hedges[i : i + 1] = [first, second] if along else [second, first]
+                ring.insert(best + 1, vertex)
+                ring_hedges[best : best + 1] = [first, second] if along else [second, first]
                 continue
             others = np.concatenate(kept)
-            if len(others):
-                reach = max(self.shape.merge_fraction * np.hypot(*(ring_xy - p).T).min(), snap)
-                if np.hypot(*(others - p).T).min() <= reach:
-                    continue
+            if len(others) and np.hypot(*(others - p).T).min() <= max(self.shape.merge_fraction * gaps.min(), snap):
+                continue
             kept.append(p[None, :])
         return np.concatenate(kept)[already:]
 
