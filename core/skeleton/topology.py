@@ -70,9 +70,9 @@ def scene_topology(scene: Scene) -> Topology:
     # scene.edge_faces lists, per edge, the polygons in the order of their corners: recover the local index
     edge_of_corner = scene.polygon_edge_ids
     entry_edge = np.repeat(np.arange(len(scene.edges), dtype=np.int64), np.diff(scene.edge_face_offsets))
-    lookup = {(int(e), int(p)): int(k) for e, p, k in zip(edge_of_corner, owner, corner)}
+    lookup = {(int(e), int(p)): int(k) for e, p, k in zip(edge_of_corner, owner, corner, strict=True)}
     edge_face_local = np.array(
-        [lookup[(int(e), int(p))] for e, p in zip(entry_edge, scene.edge_faces)], dtype=np.int64
+        [lookup[(int(e), int(p))] for e, p in zip(entry_edge, scene.edge_faces, strict=True)], dtype=np.int64
     )
 
     face_group = _flat_groups(scene)

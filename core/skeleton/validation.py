@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..bvh import STACK_SIZE
 from ..raycast import (
     CONTACT_EDGE,
     CONTACT_INTERIOR,
@@ -40,7 +41,6 @@ from ..raycast import (
     _perpendicular_frame,
     _sort_contacts,
 )
-from ..bvh import STACK_SIZE
 
 NODE_VV = 0
 NODE_VEE = 1
@@ -263,7 +263,9 @@ def _generator_blocked(
             kinds[count] = CONTACT_EDGE
             locals_[count] = ef_local[i]
             count += 1
-    return _group_blocked(points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len)
+    return _group_blocked(
+        points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len
+    )
 
 
 @njit(cache=True)
@@ -300,40 +302,9 @@ def _parallel_edges(vertices, edges, e, f, tol):
 
 
 @njit(cache=True)
-def _coplanar_swath(vertices, edges, normals, plane_offsets, vf_off, vf_face, ef_off, ef_face, r_kind, r_id, n, tol):
-    """Whether the arc's lines all lie in one plane with a face of a generator, or its three edges share a
-    plane or two of them are parallel: such swaths slide in a face plane (face events, section 2.3) or are the
-    degenerate edge triples the paper rejects (1999, section 2.2); they are not EV / EEE arcs."""
-    for j in range(n):
-        if r_kind[j] == GEN_VERTEX:
-            v = r_id[j]
-            for i in range(vf_off[v], vf_off[v + 1]):
-                f = vf_face[i]
-                inside = True
-                for k in range(n):
-                    if r_kind[k] == GEN_EDGE:
-                        for end in range(2):
-                            if not _near_plane(vertices[edges[r_id[k], end]], normals[f], plane_offsets[f], tol):
-                                inside = False
-                if inside:
-                    return True
-        else:
-            e = r_id[j]
-            for i in range(ef_off[e], ef_off[e + 1]):
-                f = ef_face[i]
-                inside = True
-                for k in range(n):
-                    if k == j:
-                        continue
-                    if r_kind[k] == GEN_VERTEX:
-                        if not _near_plane(vertices[r_id[k]], normals[f], plane_offsets[f], tol):
-                            inside = False
-                    else:
-                        for end in range(2):
-                            if not _near_plane(vertices[edges[r_id[k], end]], normals[f], plane_offsets[f], tol):
-                                inside = False
-                if inside:
-                    return True
+def _coplanar_swath(vertices, edges, r_kind, r_id, n, tol):
+    """Whether an EEE arc's three edges share a plane or two of them are parallel: the degenerate edge triples
+    the paper rejects (1999, section 2.2); they are not visual events."""
     if n == 3 and r_kind[0] == GEN_EDGE and r_kind[1] == GEN_EDGE and r_kind[2] == GEN_EDGE:
         # two parallel edges: every line meeting both lies in their plane, a pencil through the third edge's
         # crossing point, which the simplest-configuration rule leaves out (no EEE visual event there)
@@ -403,9 +374,7 @@ def _relaxed_arc(
             m[row, 2] = -w2 * tn
             m[row, 3] = w1 * tn
             row += 1
-    if row != 4 or _coplanar_swath(
-        vertices, edges, normals, plane_offsets, vf_off, vf_face, ef_off, ef_face, r_kind, r_id, n_retained, tol
-    ):
+    if row != 4 or _coplanar_swath(vertices, edges, r_kind, r_id, n_retained, tol):
         return False, 0, 0, 0, 0.0, 0
     ok, x = _solve4(m, rhs)
     if not ok:
@@ -433,8 +402,7 @@ def _relaxed_arc(
         rate = x[2] * _dot(n, f1) + x[3] * _dot(n, f2)
         offset = x[0] * _dot(n, f1) + x[1] * _dot(n, f2)
         if abs(rate) <= 1e-12:
-            if abs(offset) <= 1e-12:
-                return False, 0, 0, 0, 0.0, 0
+            # the whole family stays in the face's plane (or parallel to it): it keeps grazing the face
             continue
         crossing = -offset / rate * diag
         if crossing < sl_a[k] - tol or crossing > sl_b[k] + tol:
@@ -492,6 +460,8 @@ def _relaxed_arc(
             d = _edge_direction(vertices, edges, r_id[j], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
+            if w1 * w1 + w2 * w2 <= 1e-24:
+                return False, 0, 0, 0, 0.0, 0
             slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
             generator_shift = slide * _dot(d, u)
             for i in range(g_lo[g], g_hi[g]):
