@@ -1,0 +1,144 @@
+"""Point-polygon links (seed 000 section 4.2.1): which polygon side each receiver point gathers from, and the
+form factor of every link, exact (occluded, from exact views) or by jittered rays.
+
+Sides. Every polygon has a front side (its normal); two-sided polygons (open surfaces, DESIGN.md section 2)
+also have a back side. A *column* is a polygon side, 2 p + side; a receiver point on side s of polygon p has
+normal (+/-) n_p and gathers from a polygon q through q's side that faces it: the front when the point is in
+front of q's plane, the back (two-sided q only) when behind; points in q's plane exchange nothing with q.
+The back of a one-sided polygon faces the inside of a closed object and neither emits nor reflects.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..raycast import jittered_form_factors
+from ..visibility import exact_form_factors
+
+FRONT = 0
+BACK = 1
+
+
+@dataclass(frozen=True)
+class LinkSet:
+    """L point-polygon links: point (L,) int64 index into the caller's points; column (L,) int64 source
+    polygon side 2 q + side; form_factor (L,) float64 >= 0."""
+
+    point: np.ndarray
+    column: np.ndarray
+    form_factor: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.point)
+
+    @staticmethod
+    def empty() -> LinkSet:
+        return LinkSet(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+
+    @staticmethod
+    def concatenate(parts: list[LinkSet]) -> LinkSet:
+        if not parts:
+            return LinkSet.empty()
+        return LinkSet(
+            np.concatenate([p.point for p in parts]),
+            np.concatenate([p.column for p in parts]),
+            np.concatenate([p.form_factor for p in parts]),
+        )
+
+
+def facing_sources(scene) -> np.ndarray:
+    """(P, 2, P) bool: [p, s, q] when some of polygon q lies strictly in front of side s of polygon p and some
+    of p strictly on a radiating side of q (its front, or its back when q is two-sided): the polygon pairs
+    that can exchange light at all."""
+    eps = scene.tol.length
+    offsets = scene.polygon_offsets
+    corners = scene.polygon_points
+    owner = np.repeat(np.arange(scene.n_polygons), np.diff(offsets))
+    # heights[q-corner, p] = signed distance of each corner of q to the plane of p
+    heights = corners @ scene.normals.T + scene.plane_offsets[None, :]
+    above = np.zeros((scene.n_polygons, scene.n_polygons), dtype=bool)
+    below = np.zeros_like(above)
+    np.logical_or.at(above, owner, heights > eps)
+    np.logical_or.at(below, owner, heights < -eps)
+    # above[q, p]: q reaches in front of p. p reaches in front of q: above[p, q] = above.T[q, p]
+    in_front_of_p = above.T
+    behind_p = below.T
+    p_in_front_of_q = above
+    p_behind_q = below & scene.two_sided[None, :]
+    radiates = p_in_front_of_q | p_behind_q
+    result = np.zeros((scene.n_polygons, 2, scene.n_polygons), dtype=bool)
+    result[:, FRONT, :] = in_front_of_p & radiates
+    result[:, BACK, :] = behind_p & radiates & scene.two_sided[:, None]
+    np.fill_diagonal(result[:, FRONT, :], False)
+    np.fill_diagonal(result[:, BACK, :], False)
+    return result
+
+
+def compute_links(scene, bvh, points, polygons, sides, facing, settings) -> LinkSet:
+    """The links of receiver points: every source column the point can see, with its form factor.
+
+    points (N, 3) float64 on their polygons; polygons (N,) int64; sides (N,) int8 FRONT/BACK; facing from
+    facing_sources. Links with a zero form factor (the source entirely hidden) are dropped.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    polygons = np.asarray(polygons, dtype=np.int64)
+    sides = np.asarray(sides, dtype=np.int64)
+    normals = scene.normals[polygons] * np.where(sides == BACK, -1.0, 1.0)[:, None]
+    eps = scene.tol.length
+    at = _inside_limit(scene, points, polygons)
+    parts = []
+    for source in range(scene.n_polygons):
+        candidates = np.nonzero(facing[polygons, sides, source])[0]
+        if not len(candidates):
+            continue
+        height = at[candidates] @ scene.normals[source] + scene.plane_offsets[source]
+        side = np.where(height > eps, FRONT, np.where(height < -eps, BACK, -1))
+        keep = (side == FRONT) | ((side == BACK) & bool(scene.two_sided[source]))
+        candidates, side = candidates[keep], side[keep]
+        if not len(candidates):
+            continue
+        if settings.exact:
+            ff = exact_form_factors(scene, at[candidates], normals[candidates], source, bvh=bvh)
+        else:
+            ff = jittered_form_factors(
+                scene, bvh, at[candidates], normals[candidates], source, settings.form_factors, settings.seed
+            )
+        seen = ff > 0.0
+        parts.append(LinkSet(candidates[seen], 2 * source + side[seen], ff[seen]))
+    return LinkSet.concatenate(parts)
+
+
+# How far inside its polygon a point lying in another polygon's plane is evaluated, in length tolerances: far
+# enough that the visibility code no longer takes it for a point of that plane (its threshold is one length).
+_LIMIT_LENGTHS = 4.0
+
+
+def _inside_limit(scene, points: np.ndarray, polygons: np.ndarray) -> np.ndarray:
+    """Where each point's form factors are evaluated: the point itself, or, when it lies in the plane of a
+    polygon it touches that is not coplanar with its own (a floor corner in a wall's plane, the edge of a box
+    top against a box standing on it), a point just inside its own polygon: the form factor is discontinuous
+    there and the radiosity of the polygon is the limit from its inside."""
+    eps = scene.tol.length
+    out = points.copy()
+    for start in range(0, len(points), _CHUNK):
+        pts = points[start : start + _CHUNK]
+        own = polygons[start : start + _CHUNK]
+        near = np.all(
+            (pts[:, None, :] >= scene.polygon_min[None] - eps) & (pts[:, None, :] <= scene.polygon_max[None] + eps),
+            axis=2,
+        )
+        in_plane = np.abs(pts @ scene.normals.T + scene.plane_offsets[None, :]) <= eps
+        coplanar = np.abs(np.einsum("ij,kj->ik", scene.normals[own], scene.normals)) >= 1.0 - scene.tol.cosine
+        touching = np.any(near & in_plane & ~coplanar, axis=1)
+        if not touching.any():
+            continue
+        idx = np.nonzero(touching)[0]
+        inward = scene.centroids[own[idx]] - pts[idx]
+        inward /= np.linalg.norm(inward, axis=1)[:, None]
+        out[start + idx] = pts[idx] + _LIMIT_LENGTHS * eps * inward
+    return out
+
+
+_CHUNK = 1024

@@ -1,0 +1,355 @@
+"""The solver: seed 000 Fig. 7 — visibility, coarse lighting, then iterations of subdivision, link refinement
+and gathering at the vertices of the hierarchical triangulations, with push-pull between them.
+
+Unknowns. Radiosity is gathered at hierarchy vertices, one value per side (rows 2 v + side). Each polygon side
+radiates, as a source, the pull of its vertex values (area-weighted average over its leaf triangles, section
+3.2): X = A B with A the pull matrix (columns 2 p + side). A row gathers B_r = E_r + rho_r sum_links F X_col.
+Full global illumination solves (I - A R F) X = A E exactly (a linear system in polygon sides, small); k bounces
+apply the gather k times from X = E. Gathering at every vertex from every source it sees makes the lazy-wavelet
+Delta B of eq. 1 the difference between a vertex's gathered value and the interpolation of its ancestors', so
+push (section 3.2) reconstructs the gathered values exactly at the vertices and linearly inside the leaves.
+
+Refinement (sections 6.2-6.4). After each solve every leaf triangle is tested: the exact radiosity at its
+centroid and edge midpoints against the linear interpolation of its corners, the difference tone-mapped with
+Ward's factor (perception.py). Leaves whose error is perceptible are subdivided: with a regular grid (plus the
+maxima of the important light transfers, section 6.3) during the first `regular_levels` iterations, then by
+inserting the worst sample. Stages are generators yielding their progress; the state they change is replaced
+only when a stage completes, so a cancelled stage leaves the solver as it was.
+"""
+
+from __future__ import annotations
+
+import copy
+import resource
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from ..errors import CancelledError, VisradError
+from ..hierarchy import Hierarchy
+from ..visibility import scene_bvh
+from .links import BACK, FRONT, LinkSet, compute_links, facing_sources
+from .maxima import transfer_maxima
+from .perception import LUMINANCE_WEIGHTS, radiosity_threshold
+from .result import Result
+from .settings import Settings
+
+Progress = Callable[[str, float], None]
+# receiver points linked per chunk: progress and cancel get a say this often
+_LINK_CHUNK = 2048
+Cancel = Callable[[], bool]
+
+
+@dataclass
+class _Lighting:
+    """What gathering produced: the hierarchy, links of its vertex sides, and the solution."""
+
+    hierarchy: Hierarchy
+    links: LinkSet  # point = row 2 v + side
+    radiosity: np.ndarray  # (2 N, 3) rows 2 v + side
+    sources: np.ndarray  # (2 P, 3) radiosity each polygon side radiates (the pull X)
+    threshold: float
+
+
+class Solver:
+    """Visibility-driven hierarchical radiosity on a core.scene.Scene (DESIGN.md section 3).
+
+    Each stage is callable alone and in order: build_skeleton(), coarse_lighting(), refine(iterations);
+    solve() runs what has not run yet and returns the Result. The *_steps() generators are the same stages
+    yielding their fraction done (the add-on drives them on a timer); progress(stage, fraction) and cancel()
+    are optional callables, and a cancelled stage raises CancelledError leaving the last consistent state.
+    """
+
+    def __init__(self, scene, settings: Settings | None = None, progress: Progress | None = None,
+                 cancel: Cancel | None = None):  # fmt: skip
+        self.scene = scene
+        self.settings = settings if settings is not None else Settings()
+        if not isinstance(self.settings, Settings):
+            raise VisradError(f"settings must be a core.pipeline.Settings, got {type(self.settings).__name__}")
+        self.progress = progress
+        self.cancel = cancel
+        self.bvh = None
+        self.facing = None
+        self.lighting: _Lighting | None = None
+        self.iterations = 0
+        self.converged = False
+        self.stage_seconds: dict[str, float] = {}
+        self.refinement_log: list[dict] = []
+        self._reflectance = np.repeat(scene.reflectance, 2, axis=0)
+        emission = np.repeat(scene.emission, 2, axis=0)
+        emission[1::2] *= scene.two_sided[:, None]
+        self._emission = emission  # (2 P, 3) per polygon side
+
+    # ------------------------------------------------------------------ stages
+
+    def build_skeleton(self) -> Solver:
+        """Global visibility: the BVH and which polygon sides can exchange light at all."""
+        return self._run("build_skeleton", self.build_skeleton_steps())
+
+    def coarse_lighting(self) -> Solver:
+        """Links from every polygon corner to every source it sees (exact form factors) and the solution."""
+        return self._run("coarse_lighting", self.coarse_lighting_steps())
+
+    def refine(self, iterations: int = 1) -> bool:
+        """Run refinement iterations (subdivide, link, gather); True when converged (nothing perceptible)."""
+        for _ in range(iterations):
+            if self.converged:
+                break
+            self._run("refine", self.refine_steps())
+        return self.converged
+
+    def solve(self) -> Result:
+        """Every stage not run yet, then refinement up to Settings.max_iterations; the Result."""
+        if self.facing is None:
+            self.build_skeleton()
+        if self.lighting is None:
+            self.coarse_lighting()
+        self.refine(max(0, self.settings.max_iterations - self.iterations))
+        return self.result()
+
+    def build_skeleton_steps(self):
+        self.bvh = scene_bvh(self.scene)
+        yield 0.5
+        self.facing = facing_sources(self.scene)
+        yield 1.0
+
+    def coarse_lighting_steps(self):
+        if self.facing is None:
+            yield from self.build_skeleton_steps()
+        hierarchy = Hierarchy.from_scene(self.scene, grid=self.settings.grid)
+        parts: list[LinkSet] = []
+        for fraction in self._link_new_vertices(hierarchy, parts, 0):
+            yield 0.9 * fraction
+        self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts))
+        yield 1.0
+
+    def refine_steps(self):
+        if self.lighting is None:
+            yield from self.coarse_lighting_steps()
+        state = self.lighting
+        hierarchy = copy.deepcopy(state.hierarchy)
+        mesh = hierarchy.export_leaves()
+        errors, worst = self._leaf_errors(state, mesh)
+        yield 0.3
+        bad = errors >= state.threshold
+        refined = np.unique(mesh.triangle_element[bad])
+        record = {"iteration": self.iterations + 1, "leaves": len(mesh.triangles), "refined": len(refined)}
+        if not len(refined):
+            self.converged = True
+            self.refinement_log.append(record)
+            yield 1.0
+            return
+        regular = self.iterations < self.settings.regular_levels
+        if regular:
+            if self.iterations == 0:
+                record["maxima"] = self._insert_maxima(
+                    hierarchy, state, np.unique(hierarchy.element_polygon()[refined])
+                )
+            hierarchy.queue_regular_grid(refined)
+        else:
+            for triangle in np.nonzero(bad)[0]:
+                element = int(mesh.triangle_element[triangle])
+                polygon = int(mesh.triangle_polygon[triangle])
+                point = hierarchy.frames.to_2d(polygon, worst[triangle][None, :])
+                hierarchy.insert_into_element(element, point, np.zeros((0, 2, 2)))
+        hierarchy.complete_step()
+        yield 0.4
+        parts = [state.links]
+        for fraction in self._link_new_vertices(hierarchy, parts, len(state.radiosity) // 2):
+            yield 0.4 + 0.5 * fraction
+        self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts))
+        self.iterations += 1
+        record["vertices"] = hierarchy.vertex_count
+        self.refinement_log.append(record)
+        yield 1.0
+
+    # ------------------------------------------------------------------ result
+
+    def result(self) -> Result:
+        """The current solution as a Result (leaf triangles per side, radiosity per vertex side, stats)."""
+        if self.lighting is None:
+            raise VisradError("no lighting yet: run coarse_lighting() (or solve()) first")
+        state = self.lighting
+        mesh = state.hierarchy.export_leaves()
+        n = state.hierarchy.vertex_count
+        positions = mesh.vertices
+        front = state.radiosity[0::2]
+        back = state.radiosity[1::2]
+        two_sided_tri = self.scene.two_sided[mesh.triangle_polygon]
+        back_vertices = np.unique(mesh.triangles[two_sided_tri])
+        remap = np.full(n, -1, dtype=np.int64)
+        remap[back_vertices] = n + np.arange(len(back_vertices))
+        back_triangles = remap[mesh.triangles[two_sided_tri][:, ::-1]]
+        triangles = np.concatenate([mesh.triangles, back_triangles])
+        polygons = np.concatenate([mesh.triangle_polygon, mesh.triangle_polygon[two_sided_tri]])
+        sides = np.concatenate([np.zeros(len(mesh.triangles), np.int8), np.ones(len(back_triangles), np.int8)])
+        vertices = np.concatenate([positions, positions[back_vertices]])
+        radiosity = np.concatenate([front, back[back_vertices]])
+        return Result(
+            vertices=vertices,
+            triangles=triangles,
+            triangle_polygon=polygons,
+            triangle_side=sides,
+            radiosity=radiosity,
+            discontinuities={},
+            stats=self.stats(),
+        )
+
+    def stats(self) -> dict:
+        state = self.lighting
+        out = {
+            "seconds": dict(self.stage_seconds),
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "refinement": list(self.refinement_log),
+            "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+            "polygons": self.scene.n_polygons,
+            "discontinuities_inserted": 0,
+            "discontinuities_available": 0,
+        }
+        if state is not None:
+            out["links"] = len(state.links)
+            out["vertices"] = state.hierarchy.vertex_count
+            out["triangles"] = len(state.hierarchy.leaves())
+            out["leaf_triangles"] = len(state.hierarchy.export_leaves().triangles)
+        return out
+
+    # ------------------------------------------------------------------ internals
+
+    def _run(self, name: str, steps):
+        started = time.perf_counter()
+        for fraction in steps:
+            if self.cancel is not None and self.cancel():
+                raise CancelledError(f"{name} cancelled")
+            if self.progress is not None:
+                self.progress(name, float(fraction))
+        self.stage_seconds[name] = self.stage_seconds.get(name, 0.0) + time.perf_counter() - started
+        return self
+
+    def _vertex_sides(self, hierarchy: Hierarchy, first: int) -> tuple:
+        """Rows 2 v + side of vertices first.. and their polygons: front always, back on two-sided polygons."""
+        vertex = np.arange(first, hierarchy.vertex_count)
+        polygon = hierarchy.vertex_polygon()[vertex]
+        back = self.scene.two_sided[polygon]
+        rows = np.concatenate([2 * vertex, 2 * vertex[back] + 1])
+        order = np.argsort(rows)
+        polygons = np.concatenate([polygon, polygon[back]])[order]
+        return rows[order], polygons
+
+    def _link_new_vertices(self, hierarchy: Hierarchy, parts: list, first: int):
+        """Append to `parts` the LinkSets (point = row) of the vertices first.., in chunks; yield the fraction."""
+        rows, polygons = self._vertex_sides(hierarchy, first)
+        positions = hierarchy.vertex_positions()[rows // 2]
+        for start in range(0, len(rows), _LINK_CHUNK):
+            stop = min(start + _LINK_CHUNK, len(rows))
+            new = compute_links(
+                self.scene, self.bvh, positions[start:stop], polygons[start:stop], rows[start:stop] % 2,
+                self.facing, self.settings,
+            )  # fmt: skip
+            parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
+            yield stop / len(rows)
+
+    def _gathered(self, hierarchy: Hierarchy, links: LinkSet) -> _Lighting:
+        """Solve for the radiosity at every vertex side given the links."""
+        n_rows = 2 * hierarchy.vertex_count
+        n_cols = 2 * self.scene.n_polygons
+        gather = sp.csr_matrix((links.form_factor, (links.point, links.column)), shape=(n_rows, n_cols))
+        pull = self._pull_matrix(hierarchy, n_rows, n_cols)
+        row_polygon = np.repeat(hierarchy.vertex_polygon(), 2)
+        rho = self.scene.reflectance[row_polygon]
+        emission = self._emission[2 * row_polygon + np.tile([FRONT, BACK], hierarchy.vertex_count)]
+        bounces = self.settings.max_bounces
+        sources = np.empty((n_cols, 3))
+        if bounces is None:
+            identity = sp.identity(n_cols, format="csc")
+            for c in range(3):
+                system = identity - (pull @ sp.diags(rho[:, c]) @ gather).tocsc()
+                sources[:, c] = splu(system).solve(pull @ emission[:, c])
+        else:
+            sources = self._emission.copy()
+            for _ in range(bounces - 1):
+                sources = pull @ (emission + rho * (gather @ sources))
+        radiosity = emission + rho * (gather @ sources)
+        if bounces is None:
+            sources = pull @ radiosity
+        average = (pull @ radiosity)[0::2]
+        areas = self.scene.areas
+        adaptation = (areas[:, None] * average).sum(axis=0) / areas.sum()
+        threshold = radiosity_threshold(adaptation, self.settings)
+        return _Lighting(hierarchy, links, radiosity, sources, threshold)
+
+    def _pull_matrix(self, hierarchy: Hierarchy, n_rows: int, n_cols: int):
+        """(2 P, 2 N) sparse: each polygon side's area-weighted average of its leaf triangles' vertex means."""
+        mesh = hierarchy.export_leaves()
+        corners = mesh.vertices[mesh.triangles]
+        area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+        total = np.zeros(self.scene.n_polygons)
+        np.add.at(total, mesh.triangle_polygon, area)
+        weight = np.repeat(area / (3.0 * total[mesh.triangle_polygon]), 3)
+        vertex = mesh.triangles.ravel()
+        polygon = np.repeat(mesh.triangle_polygon, 3)
+        rows = np.concatenate([2 * polygon, 2 * polygon + 1])
+        cols = np.concatenate([2 * vertex, 2 * vertex + 1])
+        return sp.csr_matrix((np.concatenate([weight, weight]), (rows, cols)), shape=(n_cols, n_rows))
+
+    def _exact_radiosity(self, state: _Lighting, points, polygons, sides) -> np.ndarray:
+        """Radiosity gathered at arbitrary surface points (M, 3) from the current sources, (M, 3)."""
+        links = compute_links(self.scene, self.bvh, points, polygons, sides, self.facing, self.settings)
+        gather = sp.csr_matrix(
+            (links.form_factor, (links.point, links.column)), shape=(len(points), len(state.sources))
+        )
+        column = 2 * polygons + sides
+        return self._emission[column] + self.scene.reflectance[polygons] * (gather @ state.sources)
+
+    def _leaf_errors(self, state: _Lighting, mesh) -> tuple:
+        """Per leaf triangle: the largest perceptible error (luminance-weighted W/m^2) of the linear
+        interpolation at its centroid and edge midpoints, over its sides, and the worst sample (T, 3)."""
+        tri = mesh.triangles
+        count = len(tri)
+        edges = np.sort(np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
+        unique_edges, edge_of = np.unique(edges, axis=0, return_inverse=True)
+        edge_of = edge_of.reshape(count, 3)
+        positions = mesh.vertices
+        centroid = positions[tri].mean(axis=1)
+        midpoint = positions[unique_edges].mean(axis=1)
+        edge_polygon = mesh.vertex_polygon[unique_edges[:, 0]]
+        errors = np.zeros(count)
+        worst = centroid.copy()
+        worst_error = np.full(count, -1.0)
+        for side in (FRONT, BACK):
+            on_side = np.ones(count, bool) if side == FRONT else self.scene.two_sided[mesh.triangle_polygon]
+            if not on_side.any():
+                continue
+            values = state.radiosity[side::2]
+            t_idx = np.nonzero(on_side)[0]
+            e_idx = np.unique(edge_of[t_idx])
+            poly_c = mesh.triangle_polygon[t_idx]
+            exact_c = self._exact_radiosity(state, centroid[t_idx], poly_c, np.full(len(t_idx), side))
+            exact_m = np.zeros((len(unique_edges), 3))
+            exact_m[e_idx] = self._exact_radiosity(
+                state, midpoint[e_idx], edge_polygon[e_idx], np.full(len(e_idx), side)
+            )
+            err_c = np.abs(exact_c - values[tri[t_idx]].mean(axis=1)) @ LUMINANCE_WEIGHTS
+            mid_interp = values[unique_edges].mean(axis=1)
+            err_m = np.abs(exact_m - mid_interp) @ LUMINANCE_WEIGHTS
+            candidates = np.concatenate([err_c[:, None], err_m[edge_of[t_idx]]], axis=1)
+            best = np.argmax(candidates, axis=1)
+            value = candidates[np.arange(len(t_idx)), best]
+            better = value > worst_error[t_idx]
+            chosen = np.where(best[:, None] == 0, centroid[t_idx], midpoint[edge_of[t_idx, np.maximum(best - 1, 0)]])
+            worst[t_idx[better]] = chosen[better]
+            worst_error[t_idx[better]] = value[better]
+            errors[t_idx] = np.maximum(errors[t_idx], value)
+        return errors, worst
+
+    def _insert_maxima(self, hierarchy: Hierarchy, state: _Lighting, polygons: np.ndarray) -> int:
+        """Queue the maxima of the important unoccluded transfers onto the polygons being refined (6.3)."""
+        inserted = 0
+        for polygon, points in transfer_maxima(self.scene, state.sources, state.threshold, polygons, self.settings):
+            hierarchy.insert_points(polygon, points)
+            inserted += len(points)
+        return inserted
