@@ -76,18 +76,21 @@ def facing_sources(scene) -> np.ndarray:
     return result
 
 
-def compute_links(scene, bvh, points, polygons, sides, facing, settings) -> LinkSet:
+def compute_links(scene, bvh, points, polygons, sides, facing, settings, interior=None) -> LinkSet:
     """The links of receiver points: every source column the point can see, with its form factor.
 
     points (N, 3) float64 on their polygons; polygons (N,) int64; sides (N,) int8 FRONT/BACK; facing from
-    facing_sources. Links with a zero form factor (the source entirely hidden) are dropped.
+    facing_sources; interior (N, 3): a point inside the visible part of each point's polygon near it (the
+    centroid of a leaf triangle around it; default the polygon's centroid), the direction of the limit taken
+    at points on a touching boundary. Links with a zero form factor (the source entirely hidden) are dropped.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     polygons = np.asarray(polygons, dtype=np.int64)
     sides = np.asarray(sides, dtype=np.int64)
     normals = scene.normals[polygons] * np.where(sides == BACK, -1.0, 1.0)[:, None]
     eps = scene.tol.length
-    at = _inside_limit(scene, points, polygons)
+    inside = scene.centroids[polygons] if interior is None else interior
+    at = _inside_limit(scene, points, polygons, sides, facing, inside)
     parts = []
     for source in range(scene.n_polygons):
         candidates = np.nonzero(facing[polygons, sides, source])[0]
@@ -110,16 +113,19 @@ def compute_links(scene, bvh, points, polygons, sides, facing, settings) -> Link
     return LinkSet.concatenate(parts)
 
 
-# How far inside its polygon a point lying in another polygon's plane is evaluated, in length tolerances: far
-# enough that the visibility code no longer takes it for a point of that plane (its threshold is one length).
+# How far inside its polygon a point lying in another polygon's plane is evaluated: a small fraction of the way
+# to its interior point (so that, at a corner where several planes meet, it is clear of each of them), and at
+# least a few length tolerances (the visibility code takes closer points for points of the plane).
 _LIMIT_LENGTHS = 4.0
+_LIMIT_FRACTION = 1e-5
 
 
-def _inside_limit(scene, points: np.ndarray, polygons: np.ndarray) -> np.ndarray:
+def _inside_limit(scene, points, polygons, sides, facing, interior) -> np.ndarray:
     """Where each point's form factors are evaluated: the point itself, or, when it lies in the plane of a
-    polygon it touches that is not coplanar with its own (a floor corner in a wall's plane, the edge of a box
-    top against a box standing on it), a point just inside its own polygon: the form factor is discontinuous
-    there and the radiosity of the polygon is the limit from its inside."""
+    polygon it touches that rises in front of it (a floor corner in a wall's plane, the edge of a box top
+    against a box standing on it), a point just inside its own polygon, toward `interior`: the form factor is
+    discontinuous there and the radiosity of the polygon is the limit from its (visible) inside. The other
+    faces of a convex corner lie behind the point and change nothing."""
     eps = scene.tol.length
     out = points.copy()
     for start in range(0, len(points), _CHUNK):
@@ -130,14 +136,15 @@ def _inside_limit(scene, points: np.ndarray, polygons: np.ndarray) -> np.ndarray
             axis=2,
         )
         in_plane = np.abs(pts @ scene.normals.T + scene.plane_offsets[None, :]) <= eps
-        coplanar = np.abs(np.einsum("ij,kj->ik", scene.normals[own], scene.normals)) >= 1.0 - scene.tol.cosine
-        touching = np.any(near & in_plane & ~coplanar, axis=1)
+        in_front = facing[own, sides[start : start + _CHUNK]]
+        touching = np.any(near & in_plane & in_front, axis=1)
         if not touching.any():
             continue
         idx = np.nonzero(touching)[0]
-        inward = scene.centroids[own[idx]] - pts[idx]
-        inward /= np.linalg.norm(inward, axis=1)[:, None]
-        out[start + idx] = pts[idx] + _LIMIT_LENGTHS * eps * inward
+        inward = interior[start + idx] - pts[idx]
+        distance = np.linalg.norm(inward, axis=1)
+        step = np.minimum(np.maximum(_LIMIT_FRACTION * distance, _LIMIT_LENGTHS * eps), 0.5 * distance)
+        out[start + idx] = pts[idx] + (step / np.maximum(distance, eps))[:, None] * inward
     return out
 
 

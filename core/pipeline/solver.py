@@ -32,6 +32,7 @@ from scipy.sparse.linalg import splu
 from ..errors import CancelledError, VisradError
 from ..hierarchy import Hierarchy
 from ..visibility import scene_bvh
+from .contact import contact_regions, covered_fraction, inside_regions
 from .links import BACK, FRONT, LinkSet, compute_links, facing_sources
 from .maxima import transfer_maxima
 from .perception import LUMINANCE_WEIGHTS, radiosity_threshold
@@ -74,6 +75,8 @@ class Solver:
         self.cancel = cancel
         self.bvh = None
         self.facing = None
+        self.contacts: dict = {}
+        self.hidden_polygons = np.zeros(scene.n_polygons, dtype=bool)
         self.lighting: _Lighting | None = None
         self.iterations = 0
         self.converged = False
@@ -114,13 +117,26 @@ class Solver:
     def build_skeleton_steps(self):
         self.bvh = scene_bvh(self.scene)
         yield 0.5
-        self.facing = facing_sources(self.scene)
+        facing = facing_sources(self.scene)
+        contacts = contact_regions(self.scene)
+        uncovered = (1.0 - covered_fraction(self.scene, contacts)) * self.scene.areas
+        longest = np.array([_longest_side(self.scene.polygon(p)) for p in range(self.scene.n_polygons)])
+        hidden = uncovered <= self.scene.tol.snap * longest
+        facing[hidden] = False
+        facing[:, :, hidden] = False
+        self.facing, self.contacts, self.hidden_polygons = facing, contacts, hidden
         yield 1.0
 
     def coarse_lighting_steps(self):
         if self.facing is None:
             yield from self.build_skeleton_steps()
         hierarchy = Hierarchy.from_scene(self.scene, grid=self.settings.grid)
+        partial = [p for p in self.contacts if not self.hidden_polygons[p]]
+        for polygon in partial:
+            for piece in self.contacts[polygon]:
+                hierarchy.insert_segments(polygon, np.stack([piece, np.roll(piece, -1, axis=0)], axis=1))
+        if partial:
+            hierarchy.complete_step()
         parts: list[LinkSet] = []
         for fraction in self._link_new_vertices(hierarchy, parts, 0):
             yield 0.9 * fraction
@@ -175,20 +191,21 @@ class Solver:
             raise VisradError("no lighting yet: run coarse_lighting() (or solve()) first")
         state = self.lighting
         mesh = state.hierarchy.export_leaves()
-        n = state.hierarchy.vertex_count
-        positions = mesh.vertices
-        front = state.radiosity[0::2]
-        back = state.radiosity[1::2]
-        two_sided_tri = self.scene.two_sided[mesh.triangle_polygon]
-        back_vertices = np.unique(mesh.triangles[two_sided_tri])
-        remap = np.full(n, -1, dtype=np.int64)
-        remap[back_vertices] = n + np.arange(len(back_vertices))
-        back_triangles = remap[mesh.triangles[two_sided_tri][:, ::-1]]
-        triangles = np.concatenate([mesh.triangles, back_triangles])
-        polygons = np.concatenate([mesh.triangle_polygon, mesh.triangle_polygon[two_sided_tri]])
-        sides = np.concatenate([np.zeros(len(mesh.triangles), np.int8), np.ones(len(back_triangles), np.int8)])
-        vertices = np.concatenate([positions, positions[back_vertices]])
-        radiosity = np.concatenate([front, back[back_vertices]])
+        shown = self._visible_triangles(mesh)
+        front_tri, front_poly = mesh.triangles[shown], mesh.triangle_polygon[shown]
+        used = np.unique(front_tri)
+        remap = np.full(state.hierarchy.vertex_count, -1, dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        two_sided_tri = self.scene.two_sided[front_poly]
+        back_used = np.unique(front_tri[two_sided_tri])
+        back_remap = np.full(state.hierarchy.vertex_count, -1, dtype=np.int64)
+        back_remap[back_used] = len(used) + np.arange(len(back_used))
+        back_triangles = back_remap[front_tri[two_sided_tri][:, ::-1]]
+        triangles = np.concatenate([remap[front_tri], back_triangles])
+        polygons = np.concatenate([front_poly, front_poly[two_sided_tri]])
+        sides = np.concatenate([np.zeros(len(front_tri), np.int8), np.ones(len(back_triangles), np.int8)])
+        vertices = np.concatenate([mesh.vertices[used], mesh.vertices[back_used]])
+        radiosity = np.concatenate([state.radiosity[2 * used], state.radiosity[2 * back_used + 1]])
         return Result(
             vertices=vertices,
             triangles=triangles,
@@ -244,14 +261,26 @@ class Solver:
         """Append to `parts` the LinkSets (point = row) of the vertices first.., in chunks; yield the fraction."""
         rows, polygons = self._vertex_sides(hierarchy, first)
         positions = hierarchy.vertex_positions()[rows // 2]
+        interior = self._vertex_interiors(hierarchy)[rows // 2]
         for start in range(0, len(rows), _LINK_CHUNK):
             stop = min(start + _LINK_CHUNK, len(rows))
             new = compute_links(
                 self.scene, self.bvh, positions[start:stop], polygons[start:stop], rows[start:stop] % 2,
-                self.facing, self.settings,
+                self.facing, self.settings, interior[start:stop],
             )  # fmt: skip
             parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
             yield stop / len(rows)
+
+    def _vertex_interiors(self, hierarchy: Hierarchy) -> np.ndarray:
+        """(N, 3): for every vertex the centroid of a visible leaf triangle around it (of any, when none is)."""
+        mesh = hierarchy.export_leaves()
+        centroids = mesh.vertices[mesh.triangles].mean(axis=1)
+        interior = self.scene.centroids[hierarchy.vertex_polygon()].copy()
+        visible = self._visible_triangles(mesh)
+        for chosen in (~visible, visible):
+            for k in range(3):
+                interior[mesh.triangles[chosen, k]] = centroids[chosen]
+        return interior
 
     def _gathered(self, hierarchy: Hierarchy, links: LinkSet) -> _Lighting:
         """Solve for the radiosity at every vertex side given the links."""
@@ -285,20 +314,23 @@ class Solver:
     def _pull_matrix(self, hierarchy: Hierarchy, n_rows: int, n_cols: int):
         """(2 P, 2 N) sparse: each polygon side's area-weighted average of its leaf triangles' vertex means."""
         mesh = hierarchy.export_leaves()
-        corners = mesh.vertices[mesh.triangles]
+        shown = self._visible_triangles(mesh)
+        mesh_triangles, mesh_polygon = mesh.triangles[shown], mesh.triangle_polygon[shown]
+        corners = mesh.vertices[mesh_triangles]
         area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
         total = np.zeros(self.scene.n_polygons)
-        np.add.at(total, mesh.triangle_polygon, area)
-        weight = np.repeat(area / (3.0 * total[mesh.triangle_polygon]), 3)
-        vertex = mesh.triangles.ravel()
-        polygon = np.repeat(mesh.triangle_polygon, 3)
+        np.add.at(total, mesh_polygon, area)
+        weight = np.repeat(area / (3.0 * total[mesh_polygon]), 3)
+        vertex = mesh_triangles.ravel()
+        polygon = np.repeat(mesh_polygon, 3)
         rows = np.concatenate([2 * polygon, 2 * polygon + 1])
         cols = np.concatenate([2 * vertex, 2 * vertex + 1])
         return sp.csr_matrix((np.concatenate([weight, weight]), (rows, cols)), shape=(n_cols, n_rows))
 
-    def _exact_radiosity(self, state: _Lighting, points, polygons, sides) -> np.ndarray:
-        """Radiosity gathered at arbitrary surface points (M, 3) from the current sources, (M, 3)."""
-        links = compute_links(self.scene, self.bvh, points, polygons, sides, self.facing, self.settings)
+    def _exact_radiosity(self, state: _Lighting, points, polygons, sides, interior) -> np.ndarray:
+        """Radiosity gathered at surface points (M, 3) from the current sources, (M, 3); interior (M, 3) as
+        in compute_links."""
+        links = compute_links(self.scene, self.bvh, points, polygons, sides, self.facing, self.settings, interior)
         gather = sp.csr_matrix(
             (links.form_factor, (links.point, links.column)), shape=(len(points), len(state.sources))
         )
@@ -328,10 +360,12 @@ class Solver:
             t_idx = np.nonzero(on_side)[0]
             e_idx = np.unique(edge_of[t_idx])
             poly_c = mesh.triangle_polygon[t_idx]
-            exact_c = self._exact_radiosity(state, centroid[t_idx], poly_c, np.full(len(t_idx), side))
+            exact_c = self._exact_radiosity(state, centroid[t_idx], poly_c, np.full(len(t_idx), side), centroid[t_idx])
+            edge_interior = np.zeros((len(unique_edges), 3))
+            edge_interior[edge_of[t_idx].ravel()] = np.repeat(centroid[t_idx], 3, axis=0)
             exact_m = np.zeros((len(unique_edges), 3))
             exact_m[e_idx] = self._exact_radiosity(
-                state, midpoint[e_idx], edge_polygon[e_idx], np.full(len(e_idx), side)
+                state, midpoint[e_idx], edge_polygon[e_idx], np.full(len(e_idx), side), edge_interior[e_idx]
             )
             err_c = np.abs(exact_c - values[tri[t_idx]].mean(axis=1)) @ LUMINANCE_WEIGHTS
             mid_interp = values[unique_edges].mean(axis=1)
@@ -344,7 +378,16 @@ class Solver:
             worst[t_idx[better]] = chosen[better]
             worst_error[t_idx[better]] = value[better]
             errors[t_idx] = np.maximum(errors[t_idx], value)
+        errors[~self._visible_triangles(mesh)] = 0.0
         return errors, worst
+
+    def _visible_triangles(self, mesh) -> np.ndarray:
+        """(T,) bool: leaf triangles not hidden by contact (their polygon covered, or inside a contact piece)."""
+        shown = ~self.hidden_polygons[mesh.triangle_polygon]
+        if self.contacts:
+            centroids = mesh.vertices[mesh.triangles].mean(axis=1)
+            shown &= ~inside_regions(centroids, mesh.triangle_polygon, self.scene, self.contacts)
+        return shown
 
     def _insert_maxima(self, hierarchy: Hierarchy, state: _Lighting, polygons: np.ndarray) -> int:
         """Queue the maxima of the important unoccluded transfers onto the polygons being refined (6.3)."""
@@ -353,3 +396,7 @@ class Solver:
             hierarchy.insert_points(polygon, points)
             inserted += len(points)
         return inserted
+
+
+def _longest_side(corners: np.ndarray) -> float:
+    return float(np.max(np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)))
