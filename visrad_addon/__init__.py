@@ -7,9 +7,9 @@ from . import numba_cache
 
 numba_cache.configure(__package__.rpartition(".")[0])
 
-from . import operators, properties, session, ui  # noqa: E402
+from . import operators, properties, session, stages, ui  # noqa: E402
 
-_modules = (properties, session, operators, ui)
+_modules = (properties, session, operators, stages, ui)
 
 
 def register():

@@ -1,7 +1,7 @@
 """The operators that need no solver: check the scene (conversion summary and warnings) and clear results.
 
 Operators stay thin: they read the scene's settings, call convert / session / write_back, and report.
-The stage operators (build skeleton, coarse lighting, refine, bake, write results) come with core.pipeline.
+The stage operators (build skeleton, coarse lighting, refine, bake, write results) are in stages.py.
 """
 
 from __future__ import annotations

@@ -6,12 +6,14 @@ calls. They cannot live in the .blend file (numpy arrays, numba structures), so 
 by the Blender scene's `session_uid` (stable for the scene while Blender runs, unlike its name).
 
 A session is valid for one *fingerprint*: a hash of the converted Scene's arrays (vertices, polygons,
-reflectance, emission, sides, object ids), the names of the converted objects and the solver settings. Any
-change of geometry, transforms, materials, lights, exclusion or settings changes it. `SessionStore.open`
-converts the scene, compares fingerprints and returns the existing session only when they are equal, else a
-fresh one: stale state can never be used (also after an undo). The depsgraph handler only marks sessions
-`dirty` (cheap), which the panel shows ("The scene changed since the check") without converting the scene at
-every redraw.
+reflectance, emission, sides, object ids), the names of the converted objects and the solver settings that
+shape the solution (JND, bounces, form factors). Any change of geometry, transforms, materials, lights,
+exclusion or those settings changes it. `max_iterations` only says when a bake stops and the preset name only
+what the panel shows, so they are left out: raising the iteration limit continues the same solution.
+`SessionStore.open` converts the scene, compares fingerprints and returns the existing session only when they
+are equal, else a fresh one: stale state can never be used (also after an undo). The depsgraph handler only
+marks sessions `dirty` (cheap), which the panel shows ("The scene changed since the check") without converting
+the scene at every redraw.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from bpy.app.handlers import persistent
 from .convert import SourceMap, scene_from_blender
 from .write_back import ROLE_PROPERTY
 
+# settings that do not change the solution: the session keeps its solver when only these change
+_STOPPING_SETTINGS = frozenset({"max_iterations", "preset"})
 _FINGERPRINT_ARRAYS = (
     "vertices",
     "polygon_offsets",
@@ -39,14 +43,14 @@ _FINGERPRINT_ARRAYS = (
 
 
 def fingerprint(scene, source_map: SourceMap, settings: dict) -> str:
-    """A hex digest that changes whenever the converted scene or the solver settings change."""
+    """A hex digest that changes whenever the converted scene or a setting that shapes the solution changes."""
     digest = hashlib.sha256()
     for name in _FINGERPRINT_ARRAYS:
         array = np.ascontiguousarray(getattr(scene, name))
         digest.update(f"{name}:{array.dtype.str}:{array.shape};".encode())
         digest.update(array.tobytes())
     digest.update(repr([source.name for source in source_map.objects]).encode())
-    digest.update(repr(sorted(settings.items())).encode())
+    digest.update(repr(sorted((k, v) for k, v in settings.items() if k not in _STOPPING_SETTINGS)).encode())
     return digest.hexdigest()
 
 
@@ -54,11 +58,11 @@ def fingerprint(scene, source_map: SourceMap, settings: dict) -> str:
 class Session:
     """What the stages of one Blender scene share.
 
-    scene, source_map: the conversion the stages work on; settings: the solver keyword arguments it was made
-    with; key: its fingerprint; layout: the objects and collections of the Blender scene then (for the
-    depsgraph handler); state: what the stages store (solver, result, statistics), by name; dirty: the
-    depsgraph handler saw a change that can alter the conversion (a hint for the panel: the next `open`
-    decides by fingerprint).
+    scene, source_map: the conversion the stages work on; settings: the solver keyword arguments of the latest
+    `open` (those that shape the solution have not changed since the session was made); key: its fingerprint;
+    layout: the objects and collections of the Blender scene then (for the depsgraph handler); state: what the
+    stages store (solver, statistics, what was written), by name; dirty: the depsgraph handler saw a change
+    that can alter the conversion (a hint for the panel: the next `open` decides by fingerprint).
     """
 
     scene: object
@@ -107,6 +111,7 @@ class SessionStore:
         session = self._sessions.get(uid)
         if session is not None and session.key == key:
             session.dirty = False
+            session.settings = dict(settings)
             session.layout = _layout_signature(blender_scene)
             return session
         session = Session(scene, source_map, dict(settings), key, _layout_signature(blender_scene))
