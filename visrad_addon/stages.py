@@ -18,12 +18,12 @@ What each stage does with the session's solver:
   converges or the scene's Max Iterations is reached, then writes the results.
 * Write Results writes the session's current solution.
 
-Transactions. A stage runs on a working copy of the session's solver (a shallow copy with its own lists and
-dicts: core's stages build new state and assign it when they complete, they never change the old state in
-place), and the copy becomes the session's solver when the stage completes. So Esc, an error, or Blender
-cancelling the operator leaves the session as it was before the running stage, and the scene untouched. Bake
-commits after each stage it completes: cancelling it keeps the visibility, the coarse lighting and the
-refinement iterations finished so far (Write Results writes them) and writes nothing.
+Transactions. An operator runs its stages on a working copy of the session's solver (a shallow copy with its
+own lists and dicts: core's stages build new state and assign it when they complete, they never change the
+old state in place), and the copy becomes the session's solver when the operator completes. So Esc, an error,
+or Blender cancelling the operator leaves the session as it was before, and the scene untouched. Bake, which
+may run for long, commits after each stage it completes: cancelling it keeps the visibility, the coarse
+lighting and the refinement iterations finished so far (Write Results writes them) and writes nothing.
 
 Statistics. After each completed stage the session's `state["stats"]` holds the solver's statistics (seconds
 per stage spent in the stage's own steps, links, vertices, leaf triangles, iterations, convergence, the
@@ -113,13 +113,16 @@ def _write(context, session) -> str:
     )
 
 
-class _SolverStage(ModalStageOperator):
-    """A stage operator: `plan(solver, settings)` lists the solver stages to run, in order (names of
+class SolverStage(ModalStageOperator):
+    """What a stage operator does, without Blender's operator type (the operators below add it; tests drive
+    these mix-ins directly). `plan(solver, settings)` lists the solver stages to run, in order (names of
     _WEIGHTS); a "refine" entry is skipped once the solver has converged. `fresh(solver)` says whether to
-    start from a new solver. `writes` makes the operator write the results when the stages are done."""
+    start from a new solver. `writes`: write the results when the stages are done. `commit_each_stage`:
+    commit every completed stage to the session (Bake), else only the whole plan."""
 
     bl_options = {"REGISTER", "UNDO"}
     writes = False
+    commit_each_stage = False
 
     @classmethod
     def poll(cls, context):
@@ -155,7 +158,6 @@ class _SolverStage(ModalStageOperator):
         self._session = session
         self._uid = blender_scene.session_uid
         self._started = time.perf_counter()
-        self._done: list[str] = []
         _running[self._uid] = self.bl_label
         return self._drive(session, solver, self.plan(solver, settings))
 
@@ -185,13 +187,17 @@ class _SolverStage(ModalStageOperator):
                 steps.close()
             working.stage_seconds[name] = working.stage_seconds.get(name, 0.0) + elapsed
             solver = working
+            if self.commit_each_stage:
+                self._commit(session, solver)
+            before += weight
+        self._commit(session, solver)
+        yield 1.0
+
+    @staticmethod
+    def _commit(session, solver) -> None:
+        if session.state.get(SOLVER) is not solver:
             session.state[SOLVER] = solver
             session.state[STATS] = solver_stats(solver)
-            self._done.append(name)
-            before += weight
-        session.state.setdefault(SOLVER, solver)
-        session.state.setdefault(STATS, solver_stats(solver))
-        yield 1.0
 
     def stage_finish(self, context) -> str:
         try:
@@ -231,10 +237,7 @@ def _missing(solver) -> list[str]:
     return plan
 
 
-class VISRAD_OT_build_skeleton(_SolverStage, bpy.types.Operator):
-    """Start over: compute the scene's global visibility (which surfaces can exchange light)"""
-
-    bl_idname = "visrad.build_skeleton"
+class BuildSkeletonStage(SolverStage):
     bl_label = "Build Skeleton"
 
     def fresh(self, solver) -> bool:
@@ -244,11 +247,7 @@ class VISRAD_OT_build_skeleton(_SolverStage, bpy.types.Operator):
         return ["build_skeleton"]
 
 
-class VISRAD_OT_coarse_lighting(_SolverStage, bpy.types.Operator):
-    """Light the coarse mesh (the scene's polygons): exact form factors from every corner to every source it
-    sees. Starts the lighting over; builds the visibility first when needed"""
-
-    bl_idname = "visrad.coarse_lighting"
+class CoarseLightingStage(SolverStage):
     bl_label = "Coarse Lighting"
 
     def fresh(self, solver) -> bool:
@@ -258,27 +257,47 @@ class VISRAD_OT_coarse_lighting(_SolverStage, bpy.types.Operator):
         return [*(["build_skeleton"] if solver.facing is None else []), "coarse_lighting"]
 
 
-class VISRAD_OT_refine(_SolverStage, bpy.types.Operator):
-    """One refinement iteration: subdivide where the lighting error is perceptible, link the new vertices,
-    solve again (runs the earlier stages first when needed)"""
-
-    bl_idname = "visrad.refine"
+class RefineStage(SolverStage):
     bl_label = "Refine"
 
     def plan(self, solver, settings):
         return [*_missing(solver), "refine"]
 
 
-class VISRAD_OT_bake(_SolverStage, bpy.types.Operator):
+class BakeStage(SolverStage):
+    bl_label = "Bake"
+    writes = True
+    commit_each_stage = True
+
+    def plan(self, solver, settings):
+        return [*_missing(solver), *["refine"] * max(0, settings["max_iterations"] - solver.iterations)]
+
+
+class VISRAD_OT_build_skeleton(BuildSkeletonStage, bpy.types.Operator):
+    """Start over: compute the scene's global visibility (which surfaces can exchange light)"""
+
+    bl_idname = "visrad.build_skeleton"
+
+
+class VISRAD_OT_coarse_lighting(CoarseLightingStage, bpy.types.Operator):
+    """Light the coarse mesh (the scene's polygons): exact form factors from every corner to every source it
+    sees. Starts the lighting over; builds the visibility first when needed"""
+
+    bl_idname = "visrad.coarse_lighting"
+
+
+class VISRAD_OT_refine(RefineStage, bpy.types.Operator):
+    """One refinement iteration: subdivide where the lighting error is perceptible, link the new vertices,
+    solve again (runs the earlier stages first when needed)"""
+
+    bl_idname = "visrad.refine"
+
+
+class VISRAD_OT_bake(BakeStage, bpy.types.Operator):
     """Every stage: visibility, coarse lighting, refinement until converged or Max Iterations, then write the
     result meshes"""
 
     bl_idname = "visrad.bake"
-    bl_label = "Bake"
-    writes = True
-
-    def plan(self, solver, settings):
-        return [*_missing(solver), *["refine"] * max(0, settings["max_iterations"] - solver.iterations)]
 
 
 class VISRAD_OT_write_results(bpy.types.Operator):
