@@ -161,10 +161,14 @@ def bake(args: argparse.Namespace, started: float) -> dict:
 
     clock = time.perf_counter()
     output.parent.mkdir(parents=True, exist_ok=True)
+    filepaths = bpy.context.preferences.filepaths
+    versions, filepaths.save_version = filepaths.save_version, 0  # no out.blend1 backup beside the output
     try:
         bpy.ops.wm.save_as_mainfile(filepath=str(output), copy=True, compress=True)
     except RuntimeError as error:
         raise BatchError(f"cannot save {output}: {_operator_message(error)}") from None
+    finally:
+        filepaths.save_version = versions
     seconds["save"] = time.perf_counter() - clock
 
     if args.render is not None:
