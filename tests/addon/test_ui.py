@@ -6,14 +6,16 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from visrad.visrad_addon import ui  # noqa: E402
+from visrad.visrad_addon import stages, ui  # noqa: E402
 from visrad.visrad_addon.session import store  # noqa: E402
 
 from tests.addon.blender_scenes import area_light, box, diffuse_material  # noqa: E402
 
+ICONS = {item.identifier for item in bpy.types.UILayout.bl_rna.functions["label"].parameters["icon"].enum_items}
+
 
 class CheckingLayout:
-    """Records labels, properties and operators; rejects names Blender would not find."""
+    """Records labels, properties and operators; rejects names and icons Blender would not find."""
 
     def __init__(self, record=None):
         self.record = record if record is not None else []
@@ -26,6 +28,7 @@ class CheckingLayout:
     row = column
 
     def label(self, text="", icon="NONE"):
+        assert icon in ICONS, f"no icon {icon!r}"
         self.record.append(("label", text))
 
     def prop(self, data, name, text=None):
@@ -33,6 +36,7 @@ class CheckingLayout:
         self.record.append(("prop", name))
 
     def operator(self, idname, icon="NONE"):
+        assert icon in ICONS, f"no icon {icon!r}"
         category, name = idname.split(".")
         assert hasattr(getattr(bpy.ops, category), name), f"no operator {idname}"
         getattr(getattr(bpy.ops, category), name).get_rna_type()
@@ -81,3 +85,40 @@ def test_results_panel_counts_and_clears(checked_scene):
     record = draw(ui.VISRAD_PT_results)
     assert ("label", "0 result meshes, 0 curve objects") in record
     assert ("operator", "visrad.clear_results") in record
+
+
+def test_solve_panel_has_every_stage_and_shows_the_statistics(checked_scene):
+    record = draw(ui.VISRAD_PT_solve)
+    operators = [name for kind, name in record if kind == "operator"]
+    assert operators == [
+        "visrad.build_skeleton",
+        "visrad.coarse_lighting",
+        "visrad.refine",
+        "visrad.write_results",
+        "visrad.bake",
+    ]
+    assert ("label", "No solution yet") in record
+
+    bpy.context.scene.visrad.max_iterations = 1
+    assert bpy.ops.visrad.bake() == {"FINISHED"}
+    labels = [text for kind, text in draw(ui.VISRAD_PT_solve) if kind == "label"]
+    stats = store.get(bpy.context.scene).state[stages.STATS]
+    state = "converged" if stats["converged"] else "not converged"
+    assert labels[0] == f"Refinement: {stats['iterations']} of 1 iterations, {state}"
+    assert f"Links: {stats['links']:,}" in labels
+    assert f"Vertices: {stats['vertices']:,}, triangles: {stats['leaf_triangles']:,}" in labels
+    assert any(text.startswith("Time: visibility ") and "coarse" in text and "refine" in text for text in labels)
+    assert any(text.startswith("Peak memory: ") and text.endswith(" MiB") for text in labels)
+    results = [text for kind, text in draw(ui.VISRAD_PT_results) if kind == "label"]
+    assert "1 result meshes, 0 curve objects" in results
+    assert any(text.startswith("Last written: ") for text in results)
+
+
+def test_solve_panel_before_lighting_and_while_a_stage_runs(checked_scene, monkeypatch):
+    bpy.ops.visrad.build_skeleton()
+    labels = [text for kind, text in draw(ui.VISRAD_PT_solve) if kind == "label"]
+    assert labels[0] == "Visibility built, no lighting yet"
+    monkeypatch.setitem(stages._running, bpy.context.scene.session_uid, "Bake")
+    labels = [text for kind, text in draw(ui.VISRAD_PT_solve) if kind == "label"]
+    assert "Bake is running (Esc cancels it)" in labels
+    assert not bpy.ops.visrad.refine.poll()
