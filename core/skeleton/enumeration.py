@@ -1,0 +1,1691 @@
+"""Node enumeration of the Visibility Skeleton: the candidate extremal stabbing lines that validation casts.
+
+Durand, Drettakis & Puech 1997 (seed 003), sections 3.2.1-3.2.2 and 5. Every node is a line through a set
+of generators (VV: two vertices; VEE / EVE: a vertex and two edges; E4: four edges) on which the part
+between the outer generators is free. This module proposes such lines; `core.skeleton.validation` casts
+each through the scene and keeps the nodes. It must propose every line validation would accept (a lost
+candidate is a lost node) and as few others as it can, since validation costs a ray cast per candidate.
+
+What prunes, and why each prune is safe (validation rejects every line pruned here):
+
+* Occlusion maps (the role of the paper's grid acceleration and double wedges, section 3.2.2). Around a
+  source (a vertex, or a short piece -- a *bin* -- of an edge) the directions are cut into the cells of a
+  cube map. A polygon whose interior (shrunk by a margin) is crossed by every line leaving the source
+  through a cell gives that cell a depth bound: every such line hits the polygon's interior within it, and
+  a polygon interior strictly between the outer generators of a line makes validation reject it. A line's
+  generators must therefore lie within the depth bound of its cell, on both sides of the source.
+* Restriction (section 3.2.2). Target edges are registered in the cells their directions from the source
+  cross, only where they lie within the cell's depth bound; lines are solved only for generators sharing a
+  cell, and each line is kept by the one cell (and bin) that contains it, so none is proposed twice.
+* Local visibility (section 3.2, "the negative half-space of a face is locally invisible"). A generator
+  between two others on the line must be grazed, not pierced: when the faces around it close around the
+  line (the test validation applies to inner generators), the line is dropped. Only decisions clear by an
+  angular margin prune; near-sliding faces keep the line.
+* Lazy construction (section 5): with `sources`, cells whose lines cannot cross a source polygon are skipped
+  and every proposed line crosses one (within tol, a line in a source's plane counting as crossing, as for
+  the skeleton's record of built sources).
+
+Outer generators get no local test: validation lets a line stop on its outer generators (a line leaving a
+floor corner), so a VV pair is never culled by the faces at its vertices, only by occlusion.
+
+Candidates: VV pairs of masked vertices; VEE lines through a masked vertex meeting two masked edges not
+incident to it (and not sharing a vertex: such a line passes through the shared vertex, where validation
+finds no edge contact); E4 transversals of four masked edges with pairwise distinct vertices, the roots of a
+quadratic (section 3.2.2 finds them by a binary search; the closed form is exact). Edges with one face
+(boundaries) and vertices of open surfaces are handled by the same tests.
+
+Every threshold comes from scene.tol: lengths are multiples of tol.length (`tol.snap` is the occlusion
+margin), angles are tol.snap / tol.scale (the angle under which tol.snap is seen across the scene).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import numpy as np
+from numba import njit
+
+from ..errors import CancelledError, SceneError
+from ..raycast import CONTACT_VERTEX, _arcs_cover_circle, _contact_arc, _perpendicular_frame
+from ..scene import Scene
+from .candidates import CANDIDATE_E4, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
+from .topology import scene_topology
+
+DEFAULT_CHUNK = 100_000
+"""Largest number of candidates in one yielded chunk by default (about one second of validation)."""
+
+CELLS = 16
+"""Cells per side of each cube-map face: 3 * CELLS**2 line directions (a line and its opposite share one)."""
+
+BIN_FRACTION = 1.0 / 12.0
+"""An edge source is cut into bins no longer than this fraction of the scene diagonal (at most MAX_BINS)."""
+
+MAX_BINS = 8
+
+_CLIP = 40
+"""Vertex capacity of the clipping buffers (a quad clipped by 9 planes has at most 13 vertices)."""
+
+_VERTEX_BATCH = 48
+_EDGE_BATCH = 24
+
+Cancel = Callable[[], bool]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# public entry point
+
+
+def iter_candidates(
+    scene: Scene,
+    vertex_mask,
+    edge_mask,
+    sources=None,
+    chunk: int = DEFAULT_CHUNK,
+    cancel: Cancel | None = None,
+) -> Iterator[tuple[NodeCandidates, float]]:
+    """Yield (candidates, fraction done) until every candidate line of the scene is proposed.
+
+    scene: core.scene.Scene. vertex_mask (V,) bool: the vertices that may generate nodes. edge_mask (E,) bool:
+    the edges that may (not flat). sources: None for every line, or polygon ids: only lines crossing one of
+    them (within tol; seed 003 section 5). chunk: most candidates per yielded NodeCandidates (>= 1).
+    cancel: a callable checked between chunks; CancelledError is raised when it returns True.
+
+    Chunks are never empty; fractions increase strictly and the last one is 1.0. Each candidate appears
+    once: VV with vertices (v, w), v < w; VEE with edges sorted; E4 with its four edges sorted.
+    """
+    vmask, emask, polygons, chunk = _check_arguments(scene, vertex_mask, edge_mask, sources, chunk)
+    if cancel is not None and not callable(cancel):
+        raise ValueError("cancel must be a callable returning bool, or None")
+    geometry = _Geometry(scene)
+    lazy = polygons is not None
+    src = np.empty(0, dtype=np.int64) if polygons is None else polygons
+
+    vertex_ids = np.flatnonzero(vmask).astype(np.int64)
+    edge_ids = np.flatnonzero(emask).astype(np.int64)
+    lengths = np.linalg.norm(
+        scene.vertices[scene.edges[edge_ids, 1]] - scene.vertices[scene.edges[edge_ids, 0]], axis=1
+    )
+    bins = np.clip(np.ceil(lengths / (BIN_FRACTION * scene.diagonal)), 1, MAX_BINS).astype(np.int64)
+
+    # work units, for the fraction: a vertex map, its VV and VEE lines, an edge bin's E4 lines
+    steps = []
+    for lo in range(0, len(vertex_ids), _VERTEX_BATCH):
+        steps.append(("map", lo, min(lo + _VERTEX_BATCH, len(vertex_ids)), 1.0))
+    for lo in range(0, len(vertex_ids), _VERTEX_BATCH):
+        steps.append(("vertex", lo, min(lo + _VERTEX_BATCH, len(vertex_ids)), 3.0))
+    for lo in range(0, len(edge_ids), _EDGE_BATCH):
+        hi = min(lo + _EDGE_BATCH, len(edge_ids))
+        steps.append(("edge", lo, hi, 2.0 * float(bins[lo:hi].sum()) / max(1, hi - lo)))
+    weights = np.array([(s[2] - s[1]) * s[3] for s in steps], dtype=np.float64)
+    total = float(weights.sum()) if len(weights) else 1.0
+
+    g = geometry
+    n_cells = 3 * CELLS * CELLS
+    vertex_depth = np.full((scene.n_vertices, 2, n_cells), np.inf)
+    pending: NodeCandidates | None = None
+    pending_fraction = 0.0
+    done = 0.0
+    buffer: list[NodeCandidates] = []
+    buffered = 0
+
+    def check_cancel():
+        if cancel is not None and cancel():
+            raise CancelledError("node enumeration cancelled")
+
+    for index, (phase, lo, hi, _) in enumerate(steps):
+        check_cancel()
+        found = None
+        if phase == "map":
+            _vertex_maps(
+                vertex_ids[lo:hi], g.vertices, g.points, g.offsets, g.normals, g.plane_offsets, g.edge_out,
+                g.centres, g.radii, *g.objects, g.grid, CELLS, g.margin, g.delta, g.eps, vertex_depth,
+            )  # fmt: skip
+        elif phase == "vertex":
+            found = _vertex_candidates(
+                vertex_ids, lo, hi, vmask, emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
+                g.plane_offsets, g.edge_out, g.vf_off, g.vf_face, g.vf_corner, g.ve_off, g.ve_edge, g.ef_off,
+                g.ef_face, g.ef_inward, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.grid, CELLS,
+                vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+            )  # fmt: skip
+        else:
+            found = _edge_candidates(
+                edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
+                g.plane_offsets, g.edge_out, g.centres, g.radii, *g.objects, g.ef_off, g.ef_face, g.ef_inward, g.vf_off,
+                g.vf_face, g.vertex_object, g.edge_object, g.grid, CELLS,
+                lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+            )  # fmt: skip
+        before = done / total
+        done += weights[index]
+        after = done / total
+        if found is not None and len(found[0]):
+            buffer.append(NodeCandidates(*found))
+            buffered += len(found[0])
+        last = index == len(steps) - 1
+        # cut the buffer into chunks; the newest chunk waits, so that the very last one can carry 1.0, and the
+        # k-th chunk cut in this step gets a fraction between the step's start and end, strictly increasing
+        cut = 0
+        while buffered >= chunk or (last and buffered > 0):
+            merged = NodeCandidates.concatenate(buffer)
+            head = _slice(merged, 0, min(chunk, len(merged)))
+            rest = _slice(merged, len(head), len(merged))
+            buffer = [rest] if len(rest) else []
+            buffered = len(rest)
+            cut += 1
+            fraction = before + (after - before) * cut / (cut + 1.0)
+            fraction = max(fraction, float(np.nextafter(pending_fraction, 2.0)))
+            if pending is not None:
+                check_cancel()
+                yield pending, pending_fraction
+            pending, pending_fraction = head, fraction
+    if pending is not None:
+        check_cancel()
+        yield pending, 1.0
+
+
+def _slice(c: NodeCandidates, lo: int, hi: int) -> NodeCandidates:
+    return NodeCandidates(c.kind[lo:hi], c.vertices[lo:hi], c.edges[lo:hi], c.origin[lo:hi], c.direction[lo:hi])
+
+
+def _check_arguments(scene, vertex_mask, edge_mask, sources, chunk):
+    if not isinstance(scene, Scene):
+        raise SceneError(f"scene must be a core.scene.Scene, got {type(scene).__name__}")
+    vmask = np.asarray(vertex_mask)
+    emask = np.asarray(edge_mask)
+    if vmask.shape != (scene.n_vertices,) or vmask.dtype != np.bool_:
+        raise SceneError(f"vertex_mask must be a ({scene.n_vertices},) bool array, got {vmask.shape} {vmask.dtype}")
+    if emask.shape != (len(scene.edges),) or emask.dtype != np.bool_:
+        raise SceneError(f"edge_mask must be a ({len(scene.edges)},) bool array, got {emask.shape} {emask.dtype}")
+    if isinstance(chunk, bool) or not isinstance(chunk, int | np.integer) or chunk < 1:
+        raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    polygons = None
+    if sources is not None:
+        try:
+            ids = np.asarray(list(sources))
+        except TypeError:
+            raise SceneError("sources must be None or an iterable of polygon ids") from None
+        if ids.size and not np.issubdtype(ids.dtype, np.integer):
+            raise SceneError(f"sources must hold polygon ids (integers), got dtype {ids.dtype}")
+        ids = np.unique(ids.astype(np.int64))
+        bad = ids[(ids < 0) | (ids >= scene.n_polygons)]
+        if len(bad):
+            raise SceneError(f"source {int(bad[0])} is not a polygon of the scene (0..{scene.n_polygons - 1})")
+        polygons = ids
+    return np.ascontiguousarray(vmask), np.ascontiguousarray(emask), polygons, int(chunk)
+
+
+class _Geometry:
+    """The scene arrays the kernels read, and the derived ones: outward edge normals of every polygon (in its
+    plane, unit), bounding spheres, adjacency (core.skeleton.topology), the inward direction of each face
+    across each of its edges, the cube-map grid, and the thresholds from scene.tol."""
+
+    def __init__(self, scene: Scene):
+        topology = scene_topology(scene)
+        self.vertices = scene.vertices
+        self.edges = scene.edges
+        self.points = scene.polygon_points
+        self.offsets = scene.polygon_offsets
+        self.normals = scene.normals
+        self.plane_offsets = scene.plane_offsets
+        counts = np.diff(self.offsets)
+        owner = np.repeat(np.arange(scene.n_polygons), counts)
+        following = self.offsets[owner] + (np.arange(len(self.points)) - self.offsets[owner] + 1) % counts[owner]
+        along = self.points[following] - self.points
+        out = np.cross(along, self.normals[owner])
+        self.edge_out = out / np.linalg.norm(out, axis=1)[:, None]
+        self.centres = scene.centroids
+        reach = np.linalg.norm(self.points - self.centres[owner], axis=1)
+        self.radii = np.maximum.reduceat(reach, self.offsets[:-1])
+        self.vf_off = topology.vertex_face_offsets
+        self.vf_face = topology.vertex_faces
+        self.vf_corner = topology.vertex_face_corner
+        self.ve_off = topology.vertex_edge_offsets
+        self.ve_edge = topology.vertex_edges
+        self.ef_off = scene.edge_face_offsets
+        self.ef_face = scene.edge_faces
+        # inward direction of face f across edge e: normal x (edge direction as f runs along it)
+        local = topology.edge_face_local
+        start = self.offsets[self.ef_face] + local
+        end = self.offsets[self.ef_face] + (local + 1) % counts[self.ef_face]
+        inward = np.cross(self.normals[self.ef_face], self.points[end] - self.points[start])
+        self.ef_inward = inward / np.linalg.norm(inward, axis=1)[:, None] if len(inward) else inward.reshape(0, 3)
+        self.grid = _grid_directions(CELLS)
+        tol = scene.tol
+        self.objects = _convex_objects(scene, tol.snap)
+        # the convex object each vertex and edge belongs to (-1: none, or faces of several objects)
+        polygon_object = np.full(scene.n_polygons, -1, dtype=np.int64)
+        object_offsets, object_polygons = self.objects[0], self.objects[1]
+        polygon_object[object_polygons] = np.repeat(np.arange(len(object_offsets) - 1), np.diff(object_offsets))
+        self.vertex_object = _element_object(self.vf_off, self.vf_face, polygon_object)
+        self.edge_object = _element_object(self.ef_off, self.ef_face, polygon_object)
+        self.tol = tol.length
+        self.margin = tol.snap
+        self.delta = tol.snap / tol.scale
+        self.eps = tol.relative
+        self.angle_tol = tol.cosine
+
+
+def _convex_objects(scene: Scene, margin: float):
+    """The closed convex objects of the scene (boxes, mostly), as fused occluders: a line through the inside
+    of one crosses its surface, whichever faces it meets. An object is used when every edge of its polygons
+    joins exactly two of them and no vertex of it lies in front of one of its face planes (beyond margin).
+
+    Returns polygon CSR (offsets (O+1,), polygon ids) and vertex CSR (offsets (O+1,), (M, 3) positions).
+    """
+    owner = scene.object_ids[scene.edge_faces]
+    counts = np.diff(scene.edge_face_offsets)
+    first = scene.edge_face_offsets[:-1]
+    closed_edge = (counts == 2) & (owner[first] == owner[np.minimum(first + 1, len(owner) - 1)])
+    open_objects = np.zeros(int(scene.object_ids.max()) + 1, dtype=bool)
+    open_objects[owner[np.repeat(~closed_edge, counts)]] = True
+    polygon_offsets = [0]
+    polygon_ids: list[np.ndarray] = []
+    vertex_offsets = [0]
+    vertex_points: list[np.ndarray] = []
+    for obj in np.flatnonzero(~open_objects):
+        polygons = np.flatnonzero(scene.object_ids == obj)
+        if len(polygons) < 4:
+            continue
+        ids = np.unique(np.concatenate([scene.polygon_vertices(int(p)) for p in polygons]))
+        points = scene.vertices[ids]
+        heights = points @ scene.normals[polygons].T + scene.plane_offsets[polygons]
+        if heights.max() > margin:
+            continue
+        polygon_ids.append(polygons)
+        polygon_offsets.append(polygon_offsets[-1] + len(polygons))
+        vertex_points.append(points)
+        vertex_offsets.append(vertex_offsets[-1] + len(points))
+    return (
+        np.array(polygon_offsets, dtype=np.int64),
+        np.concatenate(polygon_ids).astype(np.int64) if polygon_ids else np.empty(0, dtype=np.int64),
+        np.array(vertex_offsets, dtype=np.int64),
+        np.concatenate(vertex_points) if vertex_points else np.empty((0, 3)),
+    )
+
+
+def _element_object(offsets: np.ndarray, faces: np.ndarray, polygon_object: np.ndarray) -> np.ndarray:
+    """For each element of a CSR element -> faces list: the object all its faces belong to, else -1."""
+    count = len(offsets) - 1
+    result = np.full(count, -1, dtype=np.int64)
+    sizes = np.diff(offsets)
+    owners = polygon_object[faces]
+    has = sizes > 0
+    first = np.where(has, owners[np.minimum(offsets[:-1], max(len(owners) - 1, 0))], -1) if len(owners) else result
+    same = np.ones(count, dtype=bool)
+    if len(owners):
+        element = np.repeat(np.arange(count), sizes)
+        np.logical_and.at(same, element, owners == first[element])
+    result[has & same] = first[has & same]
+    return result
+
+
+def _grid_directions(n: int) -> np.ndarray:
+    """(3, n+1, n+1, 3) unit directions of the grid corners of the three positive cube-map faces: face a holds
+    the directions e_a + u e_b + w e_c (b = a+1, c = a+2 mod 3) with u, w = -1 + 2k/n."""
+    grid = np.empty((3, n + 1, n + 1, 3))
+    ticks = -1.0 + 2.0 * np.arange(n + 1) / n
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        grid[a, :, :, a] = 1.0
+        grid[a, :, :, b] = ticks[:, None]
+        grid[a, :, :, c] = ticks[None, :]
+    return grid / np.linalg.norm(grid, axis=3)[..., None]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# small geometry (numba)
+
+
+@njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _cross(a, b):
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@njit(cache=True)
+def _norm(a):
+    return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+@njit(cache=True)
+def _line_cell(d, n):
+    """The cell of a line of direction d (3,): (face axis a, i, j, flipped). The line's canonical direction
+    has a positive dominant component (the first largest); flipped tells whether that is -d."""
+    a = 0
+    big = abs(d[0])
+    if abs(d[1]) > big:
+        a = 1
+        big = abs(d[1])
+    if abs(d[2]) > big:
+        a = 2
+    inv = 1.0 / d[a]
+    u = d[(a + 1) % 3] * inv
+    w = d[(a + 2) % 3] * inv
+    i = int((u + 1.0) * 0.5 * n)
+    j = int((w + 1.0) * 0.5 * n)
+    i = min(max(i, 0), n - 1)
+    j = min(max(j, 0), n - 1)
+    return a, i, j, d[a] < 0.0
+
+
+@njit(cache=True)
+def _clip(src, count, ca, cb, cc, dst):
+    """Sutherland-Hodgman: the part of the convex polygon src[:count] (chart coordinates) where
+    ca x0 + cb x1 + cc x2 >= 0, written to dst; returns its vertex count (0 when nothing is left)."""
+    out = 0
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        p0 = src[k, 0]
+        p1 = src[k, 1]
+        p2 = src[k, 2]
+        fp = ca * p0 + cb * p1 + cc * p2
+        fq = ca * src[k2, 0] + cb * src[k2, 1] + cc * src[k2, 2]
+        if fp >= 0.0:
+            dst[out, 0] = p0
+            dst[out, 1] = p1
+            dst[out, 2] = p2
+            out += 1
+        if (fp >= 0.0) != (fq >= 0.0):
+            t = fp / (fp - fq)
+            dst[out, 0] = p0 + t * (src[k2, 0] - p0)
+            dst[out, 1] = p1 + t * (src[k2, 1] - p1)
+            dst[out, 2] = p2 + t * (src[k2, 2] - p2)
+            out += 1
+    return out
+
+
+@njit(cache=True)
+def _clip_pyramid(buf_a, count, lo_u, hi_u, lo_w, hi_w, buf_b):
+    """Clip a polygon in chart coordinates (x0 along the face axis) to the cone lo_u <= x1/x0 <= hi_u,
+    lo_w <= x2/x0 <= hi_w (x0 >= 0); the result ends in buf_a; returns its count."""
+    count = _clip(buf_a, count, -lo_u, 1.0, 0.0, buf_b)
+    count = _clip(buf_b, count, hi_u, -1.0, 0.0, buf_a)
+    count = _clip(buf_a, count, -lo_w, 0.0, 1.0, buf_b)
+    count = _clip(buf_b, count, hi_w, 0.0, -1.0, buf_a)
+    return count
+
+
+@njit(cache=True)
+def _to_chart(points, count, a, sign, origin, out):
+    """points[:count] - origin, times sign, in the coordinates of face axis a: (x_a, x_b, x_c)."""
+    b = (a + 1) % 3
+    c = (a + 2) % 3
+    for k in range(count):
+        out[k, 0] = sign * (points[k, a] - origin[a])
+        out[k, 1] = sign * (points[k, b] - origin[b])
+        out[k, 2] = sign * (points[k, c] - origin[c])
+
+
+@njit(cache=True)
+def _projected_box(buf, count):
+    """(u_min, u_max, w_min, w_max) of the central projection of buf[:count] (x0 >= 0) onto x0 = 1; the
+    whole face when a point sits at the apex."""
+    u0 = np.inf
+    u1 = -np.inf
+    w0 = np.inf
+    w1 = -np.inf
+    for k in range(count):
+        x0 = buf[k, 0]
+        if not x0 > 0.0:
+            return -1.0, 1.0, -1.0, 1.0
+        u = buf[k, 1] / x0
+        w = buf[k, 2] / x0
+        u0 = min(u0, u)
+        u1 = max(u1, u)
+        w0 = min(w0, w)
+        w1 = max(w1, w)
+    return u0, u1, w0, w1
+
+
+@njit(cache=True)
+def _segment_distance(p0, p1, p2, q0, q1, q2):
+    """Distance from the origin to the segment p-q (coordinates)."""
+    d0 = q0 - p0
+    d1 = q1 - p1
+    d2 = q2 - p2
+    dd = d0 * d0 + d1 * d1 + d2 * d2
+    t = 0.0
+    if dd > 0.0:
+        t = min(1.0, max(0.0, -(p0 * d0 + p1 * d1 + p2 * d2) / dd))
+    x0 = p0 + t * d0
+    x1 = p1 + t * d1
+    x2 = p2 + t * d2
+    return np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+
+
+@njit(cache=True)
+def _polygon_distance(buf, count):
+    """Distance from the origin to the convex polygon buf[:count] (any count >= 1, duplicates allowed)."""
+    best = np.inf
+    n0 = 0.0
+    n1 = 0.0
+    n2 = 0.0
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        best = min(best, _segment_distance(buf[k, 0], buf[k, 1], buf[k, 2], buf[k2, 0], buf[k2, 1], buf[k2, 2]))
+        n0 += buf[k, 1] * buf[k2, 2] - buf[k, 2] * buf[k2, 1]
+        n1 += buf[k, 2] * buf[k2, 0] - buf[k, 0] * buf[k2, 2]
+        n2 += buf[k, 0] * buf[k2, 1] - buf[k, 1] * buf[k2, 0]
+    if count < 3:
+        return best
+    length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if length == 0.0:
+        return best
+    n0 /= length
+    n1 /= length
+    n2 /= length
+    height = n0 * buf[0, 0] + n1 * buf[0, 1] + n2 * buf[0, 2]
+    f0 = height * n0
+    f1 = height * n1
+    f2 = height * n2
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        e0 = buf[k2, 0] - buf[k, 0]
+        e1 = buf[k2, 1] - buf[k, 1]
+        e2 = buf[k2, 2] - buf[k, 2]
+        r0 = f0 - buf[k, 0]
+        r1 = f1 - buf[k, 1]
+        r2 = f2 - buf[k, 2]
+        if (e1 * r2 - e2 * r1) * n0 + (e2 * r0 - e0 * r2) * n1 + (e0 * r1 - e1 * r0) * n2 < 0.0:
+            return best
+    return min(best, abs(height))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# occlusion maps
+
+
+@njit(cache=True)
+def _source_distance(q, nb, centre):
+    """Distance from a point to the source segment q[0]..q[nb]."""
+    return _segment_distance(q[0, 0] - centre[0], q[0, 1] - centre[1], q[0, 2] - centre[2], q[nb, 0] - centre[0],
+                             q[nb, 1] - centre[1], q[nb, 2] - centre[2])  # fmt: skip
+
+
+@njit(cache=True)
+def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
+    """(u0, u1, w0, w1): the box of the lines from the points q[0..nb] through polygon points[first:first+count]
+    on the positive face of axis a (u0 > u1 when none crosses that face)."""
+    u0 = np.inf
+    u1 = -np.inf
+    w0 = np.inf
+    w1 = -np.inf
+    for k in range(nb + 1):
+        for sign in (1.0, -1.0):
+            _to_chart(points[first : first + count], count, a, sign, q[k], buf_a)
+            m = _clip(buf_a, count, 1.0, 0.0, 0.0, buf_b)
+            for r in range(m):
+                buf_a[r] = buf_b[r]
+            m = _clip_pyramid(buf_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, buf_b)
+            if m == 0:
+                continue
+            a0, a1, b0, b1 = _projected_box(buf_a, m)
+            u0 = min(u0, a0)
+            u1 = max(u1, a1)
+            w0 = min(w0, b0)
+            w1 = max(w1, b1)
+    return u0, u1, w0, w1
+
+
+@njit(cache=True)
+def _grid_range(u0, u1, w0, w1, n):
+    """Grid corner index ranges (k0, k1, l0, l1) spanning a chart box."""
+    k0 = max(0, int(np.floor((u0 + 1.0) * 0.5 * n)))
+    k1 = min(n, int(np.ceil((u1 + 1.0) * 0.5 * n)))
+    l0 = max(0, int(np.floor((w0 + 1.0) * 0.5 * n)))
+    l1 = min(n, int(np.ceil((w1 + 1.0) * 0.5 * n)))
+    return k0, k1, l0, l1
+
+
+@njit(cache=True)
+def _depth_map(
+    q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
+    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, depth,
+):  # fmt: skip
+    """Depth bounds of the source segment q[0]..q[nb] cut in nb bins (a point when nb == 1 and q[0] == q[1]).
+
+    q (nb+1, 3) bin ends; depth (nb, 2, 3 n n) filled with inf by the caller, lowered here: depth[b, side,
+    cell] bounds where every line leaving bin b through the cell (side 0: along the canonical direction,
+    1: against it) first crosses a polygon interior. A polygon counts when the 8 corner lines (bin ends x
+    cell corners) all cross its plane on one side of the source, beyond the margin, inside it by the margin:
+    the crossings of all the lines then lie in the convex hull of those 8 points, their distances below the
+    largest of the 8. A closed convex object (object_* CSR arrays) counts when a face plane separates it from
+    the source and the 8 corner lines pass through it shrunk by the margin: then every line of the cell does
+    (the set of lines from a point through a convex body is a convex cone, and along the bin the lines of one
+    direction meeting it form an interval), so it crosses the object's surface, nearer than its farthest
+    vertex facing the source.
+    """
+    n_poly = normals.shape[0]
+    tvals = np.empty((nb + 1, n + 1, n + 1))
+    buf_a = np.empty((_CLIP, 3))
+    buf_b = np.empty((_CLIP, 3))
+    hs = np.empty(nb + 1)
+    ticks = np.empty(n + 1)
+    for k in range(n + 1):
+        ticks[k] = -1.0 + 2.0 * k / n
+    for p in range(n_poly):
+        normal = normals[p]
+        ok = True
+        for k in range(nb + 1):
+            hs[k] = _dot(normal, q[k]) + plane_offsets[p]
+            if abs(hs[k]) <= margin or (k > 0 and (hs[k] > 0.0) != (hs[0] > 0.0)):
+                ok = False
+                break
+        if not ok:
+            continue
+        # a polygon too small to cover a whole cell from the source is skipped (it only makes bounds larger)
+        far = _source_distance(q, nb, centres[p])
+        if far > radii[p] and radii[p] * np.pi < far * 0.45 / n:
+            continue
+        first = offsets[p]
+        count = offsets[p + 1] - first
+        for a in range(3):
+            u0, u1, w0, w1 = _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b)
+            if not u0 <= u1:
+                continue
+            k0, k1, l0, l1 = _grid_range(u0, u1, w0, w1, n)
+            if k1 - k0 < 1 or l1 - l0 < 1:
+                continue
+            for e in range(nb + 1):
+                for k in range(k0, k1 + 1):
+                    for l in range(l0, l1 + 1):
+                        g = grid[a, k, l]
+                        nd = _dot(normal, g)
+                        tvals[e, k, l] = np.nan
+                        if abs(nd) <= delta:
+                            continue
+                        t = -hs[e] / nd
+                        inside = True
+                        for c in range(count):
+                            corner = points[first + c]
+                            out = edge_out[first + c]
+                            x0 = q[e, 0] + t * g[0] - corner[0]
+                            x1 = q[e, 1] + t * g[1] - corner[1]
+                            x2 = q[e, 2] + t * g[2] - corner[2]
+                            if x0 * out[0] + x1 * out[1] + x2 * out[2] > -margin:
+                                inside = False
+                                break
+                        if inside:
+                            tvals[e, k, l] = t
+            for i in range(k0, k1):
+                for j in range(l0, l1):
+                    cell = (a * n + i) * n + j
+                    for b in range(nb):
+                        lowest = np.inf
+                        highest = -np.inf
+                        for e in range(b, b + 2):
+                            for di in range(2):
+                                for dj in range(2):
+                                    t = tvals[e, i + di, j + dj]
+                                    if t < lowest:
+                                        lowest = t
+                                    if t > highest:
+                                        highest = t
+                                    if np.isnan(t):
+                                        lowest = np.nan
+                        if np.isnan(lowest) or np.isnan(highest):
+                            continue
+                        if lowest > margin:
+                            if highest < depth[b, 0, cell]:
+                                depth[b, 0, cell] = highest
+                        elif highest < -margin:
+                            if -lowest < depth[b, 1, cell]:
+                                depth[b, 1, cell] = -lowest
+
+    # fused occluders: closed convex objects
+    for o in range(object_offsets.shape[0] - 1):
+        p0 = object_offsets[o]
+        p1 = object_offsets[o + 1]
+        separated = False
+        for r in range(p0, p1):
+            p = object_polygons[r]
+            apart = True
+            for k in range(nb + 1):
+                if _dot(normals[p], q[k]) + plane_offsets[p] <= margin:
+                    apart = False
+                    break
+            if apart:
+                separated = True
+                break
+        if not separated:
+            continue
+        # the farthest vertex of a face that some bin end sees from the front bounds the entry point
+        reach = 0.0
+        for r in range(p0, p1):
+            p = object_polygons[r]
+            front = False
+            for k in range(nb + 1):
+                if _dot(normals[p], q[k]) + plane_offsets[p] > 0.0:
+                    front = True
+            if not front:
+                continue
+            for c in range(offsets[p], offsets[p + 1]):
+                for k in range(nb + 1):
+                    dx = points[c, 0] - q[k, 0]
+                    dy = points[c, 1] - q[k, 1]
+                    dz = points[c, 2] - q[k, 2]
+                    reach = max(reach, np.sqrt(dx * dx + dy * dy + dz * dz))
+        # too small to hold a whole cell: skip (cheaper, and only leaves bounds larger)
+        v0 = object_vertex_offsets[o]
+        v1 = object_vertex_offsets[o + 1]
+        centre = np.zeros(3)
+        for r in range(v0, v1):
+            centre += object_vertices[r]
+        centre /= v1 - v0
+        radius = 0.0
+        for r in range(v0, v1):
+            radius = max(radius, _norm(object_vertices[r] - centre))
+        far = _source_distance(q, nb, centre)
+        if far > radius and radius * np.pi < far * 0.45 / n:
+            continue
+        for a in range(3):
+            u0 = np.inf
+            u1 = -np.inf
+            w0 = np.inf
+            w1 = -np.inf
+            for r in range(p0, p1):
+                p = object_polygons[r]
+                b0, b1, c0, c1 = _polygon_box(points, offsets[p], offsets[p + 1] - offsets[p], q, nb, a, eps, buf_a,
+                                              buf_b)  # fmt: skip
+                u0 = min(u0, b0)
+                u1 = max(u1, b1)
+                w0 = min(w0, c0)
+                w1 = max(w1, c1)
+            if not u0 <= u1:
+                continue
+            k0, k1, l0, l1 = _grid_range(u0, u1, w0, w1, n)
+            if k1 - k0 < 1 or l1 - l0 < 1:
+                continue
+            # which side of the source each corner line passes through the shrunk object (nan: misses it)
+            for e in range(nb + 1):
+                for k in range(k0, k1 + 1):
+                    for l in range(l0, l1 + 1):
+                        g = grid[a, k, l]
+                        lo = -np.inf
+                        hi = np.inf
+                        for r in range(p0, p1):
+                            p = object_polygons[r]
+                            nd = _dot(normals[p], g)
+                            h = _dot(normals[p], q[e]) + plane_offsets[p] + margin
+                            if nd > 0.0:
+                                hi = min(hi, -h / nd)
+                            elif nd < 0.0:
+                                lo = max(lo, -h / nd)
+                            elif h > 0.0:
+                                hi = -np.inf
+                        if lo < hi:
+                            tvals[e, k, l] = 1.0 if lo > 0.0 else -1.0
+                        else:
+                            tvals[e, k, l] = np.nan
+            for i in range(k0, k1):
+                for j in range(l0, l1):
+                    cell = (a * n + i) * n + j
+                    for b in range(nb):
+                        total = 0.0
+                        for e in range(b, b + 2):
+                            for di in range(2):
+                                for dj in range(2):
+                                    total += tvals[e, i + di, j + dj]
+                        if total == 8.0:
+                            if reach < depth[b, 0, cell]:
+                                depth[b, 0, cell] = reach
+                        elif total == -8.0:
+                            if reach < depth[b, 1, cell]:
+                                depth[b, 1, cell] = reach
+
+
+@njit(cache=True)
+def _vertex_maps(
+    ids, vertices, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
+    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, out,
+):  # fmt: skip
+    """Depth maps (2, 3 n n) of the vertices `ids` into out[v]."""
+    q = np.empty((2, 3))
+    depth = np.empty((1, 2, 3 * n * n))
+    for v in ids:
+        q[0] = vertices[v]
+        q[1] = vertices[v]
+        depth[:] = np.inf
+        _depth_map(
+            q, 1, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, depth,
+        )  # fmt: skip
+        out[v] = depth[0]
+
+
+@njit(cache=True)
+def _source_mask(q, nb, src, points, offsets, normals, plane_offsets, edge_out, grid, n, tol, delta, mask):
+    """mask (nb, 3 n n) bool: False only where no line leaving bin b through the cell can cross (within tol)
+    one of the polygons `src`; a line in (or parallel to) a source's plane counts as crossing."""
+    mask[:] = False
+    for p in src:
+        normal = normals[p]
+        first = offsets[p]
+        count = offsets[p + 1] - first
+        for a in range(3):
+            outside = np.zeros((nb + 1, n + 1, n + 1), dtype=np.int64)
+            parallel = np.zeros((n + 1, n + 1), dtype=np.int8)
+            for k in range(n + 1):
+                for l in range(n + 1):
+                    g = grid[a, k, l]
+                    nd = _dot(normal, g)
+                    if abs(nd) <= delta:
+                        parallel[k, l] = 2
+                        continue
+                    parallel[k, l] = 1 if nd > 0.0 else 0
+                    for e in range(nb + 1):
+                        t = -(_dot(normal, q[e]) + plane_offsets[p]) / nd
+                        bits = 0
+                        for c in range(min(count, 62)):
+                            corner = points[first + c]
+                            out = edge_out[first + c]
+                            x = q[e] + t * g - corner
+                            if _dot(x, out) > tol:
+                                bits |= 1 << c
+                        outside[e, k, l] = bits
+            for i in range(n):
+                for j in range(n):
+                    cell = (a * n + i) * n + j
+                    s = parallel[i, j]
+                    mixed = s == 2 or count > 62
+                    for di in range(2):
+                        for dj in range(2):
+                            if parallel[i + di, j + dj] != s:
+                                mixed = True
+                    for b in range(nb):
+                        if mask[b, cell]:
+                            continue
+                        if mixed:
+                            mask[b, cell] = True
+                            continue
+                        common = -1
+                        for e in range(b, b + 2):
+                            for di in range(2):
+                                for dj in range(2):
+                                    common &= outside[e, i + di, j + dj]
+                        if common == 0:
+                            mask[b, cell] = True
+
+
+@njit(cache=True)
+def _line_meets(origin, d, src, points, offsets, normals, plane_offsets, edge_out, tol, cosine):
+    """Whether the line origin + t d (d unit) crosses one of the polygons `src` (within tol), or lies in the
+    plane of one (within tol) -- the skeleton's test for lines through built sources."""
+    for p in src:
+        normal = normals[p]
+        nd = _dot(normal, d)
+        dist = _dot(normal, origin) + plane_offsets[p]
+        if abs(nd) <= cosine:
+            if abs(dist) <= tol:
+                return True
+            continue
+        x = origin - (dist / nd) * d
+        inside = True
+        for c in range(offsets[p], offsets[p + 1]):
+            if _dot(x - points[c], edge_out[c]) > tol:
+                inside = False
+                break
+        if inside:
+            return True
+    return False
+
+
+# ----------------------------------------------------------------------------------------------------------
+# registration of target edges in the cells of a source
+
+
+@njit(cache=True)
+def _register(
+    q, nb, depth, use_mask, mask, ends, target_ids, n, margin, eps, keys, targets, sides, count,
+):  # fmt: skip
+    """Append (key, target, side) for every cell of every bin through which target edge ends[t] (2, 3) may be
+    reached from the bin within the cell's depth bound. key = b * 3 n n + cell; side 0 along the canonical
+    direction. Grows the arrays when full; returns (keys, targets, sides, count)."""
+    quad = np.empty((4, 3))
+    buf_a = np.empty((_CLIP, 3))
+    buf_b = np.empty((_CLIP, 3))
+    cell_a = np.empty((_CLIP, 3))
+    cell_b = np.empty((_CLIP, 3))
+    origin = np.zeros(3)
+    n_cells = 3 * n * n
+    point_source = nb == 1 and q[0, 0] == q[1, 0] and q[0, 1] == q[1, 1] and q[0, 2] == q[1, 2]
+    for b in range(nb):
+        # the farthest any line of the bin may go: skip targets beyond every bound
+        reach = 0.0
+        for side in range(2):
+            for cell in range(n_cells):
+                if depth[b, side, cell] > reach:
+                    reach = depth[b, side, cell]
+        for t in range(target_ids.shape[0]):
+            corners = 2 if point_source else 4
+            for c in range(3):
+                quad[0, c] = ends[t, 0, c] - q[b, c]
+                quad[1, c] = ends[t, 1, c] - q[b, c]
+                quad[2, c] = ends[t, 1, c] - q[b + 1, c]
+                quad[3, c] = ends[t, 0, c] - q[b + 1, c]
+            if reach < np.inf:
+                closest = _polygon_distance(quad, corners)
+                if closest > reach + margin:
+                    continue
+            for a in range(3):
+                for side in range(2):
+                    sign = 1.0 if side == 0 else -1.0
+                    _to_chart(quad, corners, a, sign, origin, buf_a)
+                    m = _clip(buf_a, corners, 1.0, 0.0, 0.0, buf_b)
+                    for r in range(m):
+                        buf_a[r] = buf_b[r]
+                    m = _clip_pyramid(buf_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, buf_b)
+                    if m == 0:
+                        continue
+                    u0, u1, w0, w1 = _projected_box(buf_a, m)
+                    i0 = max(0, int(np.floor((u0 - eps + 1.0) * 0.5 * n)))
+                    i1 = min(n - 1, int(np.floor((u1 + eps + 1.0) * 0.5 * n)))
+                    j0 = max(0, int(np.floor((w0 - eps + 1.0) * 0.5 * n)))
+                    j1 = min(n - 1, int(np.floor((w1 + eps + 1.0) * 0.5 * n)))
+                    for i in range(i0, i1 + 1):
+                        for j in range(j0, j1 + 1):
+                            cell = (a * n + i) * n + j
+                            if use_mask and not mask[b, cell]:
+                                continue
+                            bound = depth[b, side, cell]
+                            for r in range(m):
+                                cell_a[r] = buf_a[r]
+                            lo_u = -1.0 + 2.0 * i / n - eps
+                            hi_u = -1.0 + 2.0 * (i + 1) / n + eps
+                            lo_w = -1.0 + 2.0 * j / n - eps
+                            hi_w = -1.0 + 2.0 * (j + 1) / n + eps
+                            k = _clip_pyramid(cell_a, m, lo_u, hi_u, lo_w, hi_w, cell_b)
+                            if k == 0:
+                                continue
+                            if bound < np.inf and _polygon_distance(cell_a, k) > bound + margin:
+                                continue
+                            if count == keys.shape[0]:
+                                keys = _grow(keys)
+                                targets = _grow(targets)
+                                sides = _grow8(sides)
+                            keys[count] = b * n_cells + cell
+                            targets[count] = target_ids[t]
+                            sides[count] = side
+                            count += 1
+    return keys, targets, sides, count
+
+
+@njit(cache=True)
+def _grow(a):
+    out = np.empty(2 * a.shape[0] + 16, dtype=a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _grow8(a):
+    out = np.empty(2 * a.shape[0] + 16, dtype=np.int8)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _group(keys, count, n_keys):
+    """Counting sort of keys[:count]: (order, offsets (n_keys + 1,))."""
+    offsets = np.zeros(n_keys + 1, dtype=np.int64)
+    for r in range(count):
+        offsets[keys[r] + 1] += 1
+    for k in range(n_keys):
+        offsets[k + 1] += offsets[k]
+    fill = offsets[:-1].copy()
+    order = np.empty(count, dtype=np.int64)
+    for r in range(count):
+        order[fill[keys[r]]] = r
+        fill[keys[r]] += 1
+    return order, offsets
+
+
+# ----------------------------------------------------------------------------------------------------------
+# local visibility: is an inner generator pierced by the line?
+
+
+@njit(cache=True)
+def _edge_pierced(e, d, vertices, edges, ef_off, ef_inward, delta):
+    """Whether the faces along edge e clearly close around a line of direction d (unit) through it: two of
+    them on opposite sides of the plane (e, d), each away from it by more than the angle delta. Undecided
+    (a face nearly in that plane, the line nearly along e) counts as not pierced."""
+    along = vertices[edges[e, 1]] - vertices[edges[e, 0]]
+    m = _cross(along, d)
+    length = _norm(m)
+    if length <= delta * _norm(along):
+        return False
+    positive = False
+    negative = False
+    for k in range(ef_off[e], ef_off[e + 1]):
+        s = _dot(ef_inward[k], m) / length
+        if abs(s) <= delta:
+            return False
+        if s > 0.0:
+            positive = True
+        else:
+            negative = True
+    return positive and negative
+
+
+@njit(cache=True)
+def _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol):
+    """Whether the faces around vertex v close around a line of direction d (unit) through it, as validation
+    decides for an inner vertex (core.raycast contact arcs), with half its angular gap tolerance; a face
+    nearly containing d leaves it undecided (not pierced)."""
+    count = vf_off[v + 1] - vf_off[v]
+    if count < 2:
+        return False
+    e1, e2 = _perpendicular_frame(d)
+    starts = np.empty(count)
+    lengths = np.empty(count)
+    for k in range(count):
+        face = vf_face[vf_off[v] + k]
+        if abs(_dot(normals[face], d)) <= delta:
+            return False
+        starts[k], lengths[k] = _contact_arc(points, offsets, normals, face, CONTACT_VERTEX, vf_corner[vf_off[v] + k],
+                                             e1, e2)  # fmt: skip
+    return _arcs_cover_circle(starts, lengths, count, 0.5 * angle_tol)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# candidate output
+
+
+@njit(cache=True)
+def _new_output(capacity):
+    return (
+        np.empty(capacity, dtype=np.int8),
+        np.empty((capacity, 2), dtype=np.int64),
+        np.empty((capacity, 4), dtype=np.int64),
+        np.empty((capacity, 3)),
+        np.empty((capacity, 3)),
+    )
+
+
+@njit(cache=True)
+def _push(out, count, kind, v0, v1, e0, e1, e2, e3, origin, d):
+    """Append one candidate (edges already sorted, -1 last); returns the (maybe regrown) output."""
+    o_kind, o_vert, o_edge, o_origin, o_dir = out
+    if count == o_kind.shape[0]:
+        bigger = _new_output(2 * count + 64)
+        bigger[0][:count] = o_kind
+        bigger[1][:count] = o_vert
+        bigger[2][:count] = o_edge
+        bigger[3][:count] = o_origin
+        bigger[4][:count] = o_dir
+        out = bigger
+        o_kind, o_vert, o_edge, o_origin, o_dir = out
+    o_kind[count] = kind
+    o_vert[count, 0] = v0
+    o_vert[count, 1] = v1
+    o_edge[count, 0] = e0
+    o_edge[count, 1] = e1
+    o_edge[count, 2] = e2
+    o_edge[count, 3] = e3
+    o_origin[count] = origin
+    o_dir[count] = d
+    return out
+
+
+@njit(cache=True)
+def _trim(out, count):
+    return out[0][:count].copy(), out[1][:count].copy(), out[2][:count].copy(), out[3][:count].copy(), \
+        out[4][:count].copy()  # fmt: skip
+
+
+# ----------------------------------------------------------------------------------------------------------
+# VV and VEE / EVE: lines through a vertex
+
+
+@njit(cache=True)
+def _meet(o0, o1, o2, d0, d1, d2, a0, a1, a2, b0, b1, b2):
+    """Where the line o + t d (d unit) passes closest to the line a + s (b - a): (ok, t, s, distance between
+    the lines); ok is False when they are parallel."""
+    g0 = b0 - a0
+    g1 = b1 - a1
+    g2 = b2 - a2
+    n0 = d1 * g2 - d2 * g1
+    n1 = d2 * g0 - d0 * g2
+    n2 = d0 * g1 - d1 * g0
+    nn = n0 * n0 + n1 * n1 + n2 * n2
+    if nn == 0.0:
+        return False, 0.0, 0.0, 0.0
+    w0 = a0 - o0
+    w1 = a1 - o1
+    w2 = a2 - o2
+    t = ((w1 * g2 - w2 * g1) * n0 + (w2 * g0 - w0 * g2) * n1 + (w0 * g1 - w1 * g0) * n2) / nn
+    s = ((w1 * d2 - w2 * d1) * n0 + (w2 * d0 - w0 * d2) * n1 + (w0 * d1 - w1 * d0) * n2) / nn
+    gap = abs(w0 * n0 + w1 * n1 + w2 * n2) / np.sqrt(nn)
+    return True, t, s, gap
+
+
+@njit(cache=True)
+def _meets_segment(o, d, vertices, edges, normals, ef_off, ef_face, f, tol, delta):
+    """(ok, t): whether the line o + t d (d unit) meets edge f within tol, and where along the line.
+
+    A line through an end of f (within tol / 2, and crossing the plane of each face of f that near the end)
+    meets a corner there for validation, which then finds no contact with the edge: it is refused here."""
+    a = vertices[edges[f, 0]]
+    b = vertices[edges[f, 1]]
+    ok, t, s, gap = _meet(o[0], o[1], o[2], d[0], d[1], d[2], a[0], a[1], a[2], b[0], b[1], b[2])
+    if not ok or gap > tol:
+        return False, t
+    length = np.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2)
+    if s * length < -tol or (s - 1.0) * length > tol:
+        return False, t
+    near = min(abs(s * length), abs((1.0 - s) * length))
+    if near <= 0.5 * tol:
+        steep = np.inf
+        for k in range(ef_off[f], ef_off[f + 1]):
+            steep = min(steep, abs(_dot(normals[ef_face[k]], d)))
+        if steep > delta and near + gap / steep <= 0.5 * tol:
+            return False, t
+    return True, t
+
+
+@njit(cache=True)
+def _enters_object(is_vertex, gid, u, others, n_others, vertex_object, edge_object, object_offsets, object_polygons,
+                   vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
+    """Local visibility at an outer generator (seed 003 section 3.2, made safe): whether the line leaves the
+    generator (a vertex if is_vertex, else an edge; id gid) in direction u (unit) straight into the inside of
+    the closed convex object it belongs to -- behind every face around it by more than the angle delta --
+    while none of the other generators' contact points others[:n_others] lies on or in that object. The line
+    then crosses the object's surface strictly between its generators, and validation rejects it."""
+    obj = vertex_object[gid] if is_vertex else edge_object[gid]
+    if obj < 0:
+        return False
+    lo = vf_off[gid] if is_vertex else ef_off[gid]
+    hi = vf_off[gid + 1] if is_vertex else ef_off[gid + 1]
+    for k in range(lo, hi):
+        face = vf_face[k] if is_vertex else ef_face[k]
+        if _dot(normals[face], u) >= -delta:
+            return False
+    for r in range(n_others):
+        inside = True
+        for k in range(object_offsets[obj], object_offsets[obj + 1]):
+            p = object_polygons[k]
+            if _dot(normals[p], others[r]) + plane_offsets[p] > margin:
+                inside = False
+                break
+        if inside:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _vertex_candidates(
+    vertex_ids, lo, hi, vmask, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out,
+    vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_inward, vertex_object, edge_object,
+    object_offsets, object_polygons, grid, n, vertex_depth, lazy, src, margin, delta, eps, tol, angle_tol,
+):  # fmt: skip
+    """VV candidates (v, w > v) and VEE / EVE candidates of the vertices vertex_ids[lo:hi]."""
+    out = _new_output(1024)
+    count = 0
+    n_cells = 3 * n * n
+    n_vertices = vertices.shape[0]
+    q = np.empty((2, 3))
+    mask = np.ones((1, n_cells), dtype=np.bool_)
+    depth = np.empty((1, 2, n_cells))
+    edge_ids = np.flatnonzero(emask)
+    n_edges = edge_ids.shape[0]
+    ends = np.empty((n_edges, 2, 3))
+    slots = np.empty(n_edges, dtype=np.int64)
+    ids = np.empty(n_edges, dtype=np.int64)
+    plane = np.empty((n_edges, 3))
+    keys = np.empty(4096, dtype=np.int64)
+    tgts = np.empty(4096, dtype=np.int64)
+    sides = np.empty(4096, dtype=np.int8)
+    incident = np.zeros(edges.shape[0], dtype=np.bool_)
+    d = np.empty(3)
+    back = np.empty(3)
+    others = np.empty((3, 3))
+    for index in range(lo, hi):
+        v = vertex_ids[index]
+        p = vertices[v]
+        q[0] = p
+        q[1] = p
+        if lazy:
+            _source_mask(q, 1, src, points, offsets, normals, plane_offsets, edge_out, grid, n, tol, delta, mask)
+        depth[0] = vertex_depth[v]
+
+        # VV: the pair is kept by both vertices' maps
+        for w in range(v + 1, n_vertices):
+            if not vmask[w]:
+                continue
+            d0 = vertices[w, 0] - p[0]
+            d1 = vertices[w, 1] - p[1]
+            d2 = vertices[w, 2] - p[2]
+            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if length <= tol:
+                continue
+            d[0] = d0 / length
+            d[1] = d1 / length
+            d[2] = d2 / length
+            a, i, j, flipped = _line_cell(d, n)
+            cell = (a * n + i) * n + j
+            if lazy and not mask[0, cell]:
+                continue
+            side = 1 if flipped else 0
+            if length > vertex_depth[v, side, cell] + margin or length > vertex_depth[w, 1 - side, cell] + margin:
+                continue
+            others[0] = vertices[w]
+            if _enters_object(True, v, d, others, 1, vertex_object, edge_object, object_offsets, object_polygons,
+                              vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
+                continue
+            others[0] = p
+            back[0] = -d[0]
+            back[1] = -d[1]
+            back[2] = -d[2]
+            if _enters_object(True, w, back, others, 1, vertex_object, edge_object, object_offsets, object_polygons,
+                              vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
+                continue
+            if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol, angle_tol):
+                continue
+            out = _push(out, count, CANDIDATE_VV, v, w, -1, -1, -1, -1, p, d)
+            count += 1
+
+        # VEE / EVE: register the edges not incident to v, then pair them within each cell
+        for k in range(ve_off[v], ve_off[v + 1]):
+            incident[ve_edge[k]] = True
+        m = 0
+        for e in edge_ids:
+            if incident[e]:
+                continue
+            for c in range(3):
+                ends[m, 0, c] = vertices[edges[e, 0], c]
+                ends[m, 1, c] = vertices[edges[e, 1], c]
+            fa0 = ends[m, 0, 0] - p[0]
+            fa1 = ends[m, 0, 1] - p[1]
+            fa2 = ends[m, 0, 2] - p[2]
+            fb0 = ends[m, 1, 0] - p[0]
+            fb1 = ends[m, 1, 1] - p[1]
+            fb2 = ends[m, 1, 2] - p[2]
+            # normal of the plane (v, e): every line through v meeting e lies in it
+            plane[m, 0] = fa1 * fb2 - fa2 * fb1
+            plane[m, 1] = fa2 * fb0 - fa0 * fb2
+            plane[m, 2] = fa0 * fb1 - fa1 * fb0
+            ids[m] = e
+            slots[m] = m
+            m += 1
+        for k in range(ve_off[v], ve_off[v + 1]):
+            incident[ve_edge[k]] = False
+        keys, tgts, sides, n_reg = _register(q, 1, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps, keys, tgts,
+                                             sides, 0)  # fmt: skip
+        order, group_off = _group(keys, n_reg, n_cells)
+        for cell in range(n_cells):
+            g0 = group_off[cell]
+            g1 = group_off[cell + 1]
+            for x in range(g0, g1):
+                rx = order[x]
+                sf = tgts[rx]
+                f = ids[sf]
+                pf = plane[sf]
+                nf = np.sqrt(pf[0] * pf[0] + pf[1] * pf[1] + pf[2] * pf[2])
+                for y in range(x + 1, g1):
+                    ry = order[y]
+                    sg = tgts[ry]
+                    g = ids[sg]
+                    if f == g or _share_vertex(edges, f, g):
+                        continue
+                    pg = plane[sg]
+                    d0 = pf[1] * pg[2] - pf[2] * pg[1]
+                    d1 = pf[2] * pg[0] - pf[0] * pg[2]
+                    d2 = pf[0] * pg[1] - pf[1] * pg[0]
+                    length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                    if length <= delta * nf * np.sqrt(pg[0] * pg[0] + pg[1] * pg[1] + pg[2] * pg[2]):
+                        continue
+                    d[0] = d0 / length
+                    d[1] = d1 / length
+                    d[2] = d2 / length
+                    a, i, j, flipped = _line_cell(d, n)
+                    if (a * n + i) * n + j != cell:
+                        continue
+                    if flipped:
+                        d[0] = -d[0]
+                        d[1] = -d[1]
+                        d[2] = -d[2]
+                    ok_f, tf = _meets_segment(p, d, vertices, edges, normals, ef_off, ef_face, f, tol, delta)
+                    if not ok_f:
+                        continue
+                    ok_g, tg = _meets_segment(p, d, vertices, edges, normals, ef_off, ef_face, g, tol, delta)
+                    if not ok_g:
+                        continue
+                    side_f = 0 if tf > 0.0 else 1
+                    side_g = 0 if tg > 0.0 else 1
+                    if side_f != sides[rx] or side_g != sides[ry]:
+                        continue
+                    if abs(tf) > depth[0, side_f, cell] + margin or abs(tg) > depth[0, side_g, cell] + margin:
+                        continue
+                    if side_f == side_g:
+                        inner = f if abs(tf) < abs(tg) else g
+                        if _edge_pierced(inner, d, vertices, edges, ef_off, ef_inward, delta):
+                            continue
+                    elif _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol):
+                        continue
+                    if _vee_enters(v, f, g, p, d, tf, tg, others, back, vertex_object, edge_object, object_offsets,
+                                   object_polygons, vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin,
+                                   delta):  # fmt: skip
+                        continue
+                    if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
+                                                angle_tol):  # fmt: skip
+                        continue
+                    out = _push(out, count, CANDIDATE_VEE, v, -1, min(f, g), max(f, g), -1, -1, p, d)
+                    count += 1
+    return _trim(out, count)
+
+
+@njit(cache=True)
+def _vee_enters(v, f, g, p, d, tf, tg, others, u, vertex_object, edge_object, object_offsets, object_polygons, vf_off,
+                vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
+    """Whether an outer generator of the VEE / EVE line (through p = vertex v, edges f at tf and g at tg along
+    d) leaves into its object's inside, away from the other generators (see `_enters_object`)."""
+    if (tf > 0.0) == (tg > 0.0):
+        sign = 1.0 if tf > 0.0 else -1.0
+        far = f if abs(tf) > abs(tg) else g
+        t_near = tg if far == f else tf
+        for c in range(3):
+            others[0, c] = p[c] + tf * d[c]
+            others[1, c] = p[c] + tg * d[c]
+            u[c] = sign * d[c]
+        if _enters_object(True, v, u, others, 2, vertex_object, edge_object, object_offsets, object_polygons, vf_off,
+                          vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
+            return True
+        for c in range(3):
+            others[0, c] = p[c]
+            others[1, c] = p[c] + t_near * d[c]
+            u[c] = -sign * d[c]
+        return _enters_object(False, far, u, others, 2, vertex_object, edge_object, object_offsets, object_polygons,
+                              vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta)  # fmt: skip
+    for k in range(2):
+        edge = f if k == 0 else g
+        t_own = tf if k == 0 else tg
+        t_other = tg if k == 0 else tf
+        sign = -1.0 if t_own > 0.0 else 1.0
+        for c in range(3):
+            others[0, c] = p[c]
+            others[1, c] = p[c] + t_other * d[c]
+            u[c] = sign * d[c]
+        if _enters_object(False, edge, u, others, 2, vertex_object, edge_object, object_offsets, object_polygons,
+                          vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
+            return True
+    return False
+
+
+# ----------------------------------------------------------------------------------------------------------
+# E4: lines through four edges, found from the inner edge of lowest id
+
+
+@njit(cache=True)
+def _clip2(src, count, ca, cb, cc, dst):
+    """Sutherland-Hodgman in the (s, t) plane: the part of src[:count] where ca s + cb t + cc >= 0."""
+    out = 0
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        fp = ca * src[k, 0] + cb * src[k, 1] + cc
+        fq = ca * src[k2, 0] + cb * src[k2, 1] + cc
+        if fp >= 0.0:
+            dst[out, 0] = src[k, 0]
+            dst[out, 1] = src[k, 1]
+            out += 1
+        if (fp >= 0.0) != (fq >= 0.0):
+            t = fp / (fp - fq)
+            dst[out, 0] = src[k, 0] + t * (src[k2, 0] - src[k, 0])
+            dst[out, 1] = src[k, 1] + t * (src[k2, 1] - src[k, 1])
+            out += 1
+    return out
+
+
+@njit(cache=True)
+def _curve_meets(c0, c1, c2, c3, poly, count, slack):
+    """Whether c0 + c1 s + c2 t + c3 s t vanishes (within slack) on the convex polygon poly[:count] of the
+    (s, t) plane. The function is harmonic, so its range over the polygon is its range over the boundary,
+    a quadratic along each side."""
+    lo = np.inf
+    hi = -np.inf
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        ps = poly[k, 0]
+        pt = poly[k, 1]
+        ds = poly[k2, 0] - ps
+        dt = poly[k2, 1] - pt
+        f = c0 + c1 * ps + c2 * pt + c3 * ps * pt
+        lo = min(lo, f)
+        hi = max(hi, f)
+        qa = c3 * ds * dt
+        qb = c1 * ds + c2 * dt + c3 * (ps * dt + pt * ds)
+        if qa != 0.0:
+            tau = -qb / (2.0 * qa)
+            if 0.0 < tau < 1.0:
+                fm = f + qb * tau + qa * tau * tau
+                lo = min(lo, fm)
+                hi = max(hi, fm)
+        if lo <= slack and hi >= -slack:
+            return True
+    return lo <= slack and hi >= -slack
+
+
+@njit(cache=True)
+def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
+    """The common zeros (s, t) of c0 + c1 s + c2 t + c3 s t and k0 + k1 s + k2 t + k3 s t, written to roots
+    (2, 2); returns how many (0 also when the two curves coincide: infinitely many lines, no node)."""
+    # eliminate t = -(c0 + c1 s) / (c2 + c3 s): a quadratic in s
+    qa = k1 * c3 - k3 * c1
+    qb = k0 * c3 + k1 * c2 - k2 * c1 - k3 * c0
+    qc = k0 * c2 - k2 * c0
+    scale = max(abs(c0), abs(c1), abs(c2), abs(c3)) * max(abs(k0), abs(k1), abs(k2), abs(k3))
+    if max(abs(qa), abs(qb), abs(qc)) <= cosine * scale:
+        return 0
+    s_roots = np.empty(2)
+    found = 0
+    if qa == 0.0:
+        if qb == 0.0:
+            return 0
+        s_roots[0] = -qc / qb
+        found = 1
+    else:
+        disc = qb * qb - 4.0 * qa * qc
+        if disc < 0.0:
+            return 0
+        root = np.sqrt(disc)
+        big = -0.5 * (qb + (root if qb >= 0.0 else -root))
+        if big == 0.0:
+            s_roots[0] = 0.0
+            found = 1
+        else:
+            s_roots[0] = big / qa
+            s_roots[1] = qc / big
+            found = 2
+    n_out = 0
+    for r in range(found):
+        s = s_roots[r]
+        den1 = c2 + c3 * s
+        den2 = k2 + k3 * s
+        if abs(den1) >= abs(den2):
+            if den1 == 0.0:
+                continue
+            t = -(c0 + c1 * s) / den1
+        else:
+            t = -(k0 + k1 * s) / den2
+        roots[n_out, 0] = s
+        roots[n_out, 1] = t
+        n_out += 1
+    return n_out
+
+
+@njit(cache=True)
+def _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, vec):
+    """The k-th bounding plane of a cell's cone (chart axis a) applied to vec (3,): >= 0 inside."""
+    b = (a + 1) % 3
+    c = (a + 2) % 3
+    if k == 0:
+        return vec[b] - lo_u * vec[a]
+    if k == 1:
+        return hi_u * vec[a] - vec[b]
+    if k == 2:
+        return vec[c] - lo_w * vec[a]
+    return hi_w * vec[a] - vec[c]
+
+
+@njit(cache=True)
+def _edge_candidates(
+    sources, source_bins, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, centres, radii,
+    object_offsets, object_polygons, object_vertex_offsets, object_vertices, ef_off, ef_face, ef_inward, vf_off,
+    vf_face, vertex_object, edge_object, grid, n, lazy, src, margin, delta, eps, tol, angle_tol,
+):  # fmt: skip
+    """E4 candidates whose inner edge of lowest id is one of `sources` (cut in source_bins bins each).
+
+    For a bin of source edge e and a cell, the lines are parametrised by their points E(s) on e and X(t) on a
+    pivot edge x; those with a direction in the cell form a convex region R of the (s, t) plane, and the
+    lines of the family meeting another edge y form the zero set of a bilinear function (the EEE restriction
+    of seed 003 section 3.2.2). Only edges whose curve crosses R are paired; each pair of curves meets in at
+    most two points, the E4 lines.
+    """
+    out = _new_output(256)
+    count = 0
+    n_cells = 3 * n * n
+    edge_ids = np.flatnonzero(emask)
+    n_edges = edge_ids.shape[0]
+    ends = np.empty((n_edges, 2, 3))
+    ids = np.empty(n_edges, dtype=np.int64)
+    slots = np.empty(n_edges, dtype=np.int64)
+    rel = np.empty((n_edges, 3))  # x_a - e_a
+    along = np.empty((n_edges, 3))  # x_b - x_a
+    wg = np.empty((n_edges, 3))  # (y_a - e_a) x (y_b - y_a)
+    dg = np.empty((n_edges, 3))  # (e_b - e_a) x (y_b - y_a)
+    keys = np.empty(4096, dtype=np.int64)
+    tgts = np.empty(4096, dtype=np.int64)
+    sides = np.empty(4096, dtype=np.int8)
+    roots = np.empty((2, 2))
+    four = np.empty(4, dtype=np.int64)
+    region = np.empty((16, 2))
+    scratch = np.empty((16, 2))
+    coef = np.empty((n_edges, 4))
+    chosen = np.empty(n_edges, dtype=np.int64)
+    gen = np.empty(3, dtype=np.int64)
+    reg = np.empty(3, dtype=np.int64)
+    pos = np.empty(3)
+    start = np.empty(3)
+    d = np.empty(3)
+    u = np.empty(3)
+    others = np.empty((3, 3))
+    for index in range(sources.shape[0]):
+        e = sources[index]
+        nb = source_bins[index]
+        ea = vertices[edges[e, 0]]
+        eb = vertices[edges[e, 1]]
+        ed = eb - ea
+        q = np.empty((nb + 1, 3))
+        for k in range(nb + 1):
+            q[k] = ea + (k / nb) * ed
+        mask = np.ones((nb, n_cells), dtype=np.bool_)
+        if lazy:
+            _source_mask(q, nb, src, points, offsets, normals, plane_offsets, edge_out, grid, n, tol, delta, mask)
+            if not mask.any():
+                continue
+        depth = np.full((nb, 2, n_cells), np.inf)
+        _depth_map(
+            q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, depth,
+        )  # fmt: skip
+        m = 0
+        for f in edge_ids:
+            if f == e or _share_vertex(edges, e, f):
+                continue
+            xa = vertices[edges[f, 0]]
+            xb = vertices[edges[f, 1]]
+            for c in range(3):
+                ends[m, 0, c] = xa[c]
+                ends[m, 1, c] = xb[c]
+                rel[m, c] = xa[c] - ea[c]
+                along[m, c] = xb[c] - xa[c]
+            wg[m] = _cross(rel[m], along[m])
+            dg[m] = _cross(ed, along[m])
+            ids[m] = f
+            slots[m] = m
+            m += 1
+        keys, tgts, sides, n_reg = _register(q, nb, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps, keys, tgts,
+                                             sides, 0)  # fmt: skip
+        order, group_off = _group(keys, n_reg, nb * n_cells)
+        len_e = _norm(ed)
+        for key in range(nb * n_cells):
+            g0 = group_off[key]
+            g1 = group_off[key + 1]
+            if g1 - g0 < 3:
+                continue
+            b = key // n_cells
+            cell = key - b * n_cells
+            a = cell // (n * n)
+            i = (cell // n) % n
+            j = cell % n
+            lo_u = -1.0 + 2.0 * i / n - eps
+            hi_u = -1.0 + 2.0 * (i + 1) / n + eps
+            lo_w = -1.0 + 2.0 * j / n - eps
+            hi_w = -1.0 + 2.0 * (j + 1) / n + eps
+            s_lo = b / nb - eps
+            s_hi = (b + 1) / nb + eps
+            for xi in range(g0, g1 - 2):
+                rx = order[xi]
+                sx = tgts[rx]
+                fx = ids[sx]
+                sign = 1.0 if sides[rx] == 0 else -1.0
+                # R: lines E(s) X(t) of the bin whose direction +-(X - E) lies in the cell
+                region[0, 0] = s_lo
+                region[0, 1] = 0.0
+                region[1, 0] = s_hi
+                region[1, 1] = 0.0
+                region[2, 0] = s_hi
+                region[2, 1] = 1.0
+                region[3, 0] = s_lo
+                region[3, 1] = 1.0
+                k_count = 4
+                for k in range(4):
+                    cs = -sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, ed)
+                    ct = sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, along[sx])
+                    cc = sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, rel[sx])
+                    k_count = _clip2(region, k_count, cs, ct, cc, scratch)
+                    for r in range(k_count):
+                        region[r, 0] = scratch[r, 0]
+                        region[r, 1] = scratch[r, 1]
+                if k_count == 0:
+                    continue
+                h = rel[sx]
+                xd = along[sx]
+                n_chosen = 0
+                for yi in range(xi + 1, g1):
+                    ry = order[yi]
+                    sy = tgts[ry]
+                    fy = ids[sy]
+                    if fy == fx or _share_vertex(edges, fx, fy):
+                        continue
+                    w = wg[sy]
+                    g = dg[sy]
+                    c0 = h[0] * w[0] + h[1] * w[1] + h[2] * w[2]
+                    c1 = -(ed[0] * w[0] + ed[1] * w[1] + ed[2] * w[2]) - (h[0] * g[0] + h[1] * g[1] + h[2] * g[2])
+                    c2 = xd[0] * w[0] + xd[1] * w[1] + xd[2] * w[2]
+                    c3 = -(xd[0] * g[0] + xd[1] * g[1] + xd[2] * g[2])
+                    slack = eps * (abs(c0) + abs(c1) + abs(c2) + abs(c3))
+                    if not _curve_meets(c0, c1, c2, c3, region, k_count, slack):
+                        continue
+                    chosen[n_chosen] = ry
+                    coef[n_chosen, 0] = c0
+                    coef[n_chosen, 1] = c1
+                    coef[n_chosen, 2] = c2
+                    coef[n_chosen, 3] = c3
+                    n_chosen += 1
+                for ya in range(n_chosen):
+                    ry = chosen[ya]
+                    fy = ids[tgts[ry]]
+                    for za in range(ya + 1, n_chosen):
+                        rz = chosen[za]
+                        fz = ids[tgts[rz]]
+                        if fz == fy or _share_vertex(edges, fy, fz):
+                            continue
+                        behind = sides[rx] + sides[ry] + sides[rz]
+                        if behind == 0 or behind == 3:
+                            continue
+                        found = _quadratic_roots(coef[ya, 0], coef[ya, 1], coef[ya, 2], coef[ya, 3], coef[za, 0],
+                                                 coef[za, 1], coef[za, 2], coef[za, 3], angle_tol, roots)  # fmt: skip
+                        for r in range(found):
+                            s = roots[r, 0]
+                            t = roots[r, 1]
+                            if s * len_e < -tol or (s - 1.0) * len_e > tol:
+                                continue
+                            if min(max(int(s * nb), 0), nb - 1) != b:
+                                continue
+                            for c in range(3):
+                                start[c] = ea[c] + s * ed[c]
+                                d[c] = h[c] + t * xd[c] + ea[c] - start[c]
+                            length = _norm(d)
+                            if length <= tol:
+                                continue
+                            for c in range(3):
+                                d[c] /= length
+                            ca, ci, cj, flipped = _line_cell(d, n)
+                            if (ca * n + ci) * n + cj != cell:
+                                continue
+                            if flipped:
+                                for c in range(3):
+                                    d[c] = -d[c]
+                            gen[0] = fx
+                            gen[1] = fy
+                            gen[2] = fz
+                            reg[0] = rx
+                            reg[1] = ry
+                            reg[2] = rz
+                            ok = True
+                            for k in range(3):
+                                hit, tk = _meets_segment(start, d, vertices, edges, normals, ef_off, ef_face, gen[k],
+                                                         tol, delta)  # fmt: skip
+                                side = 0 if tk > 0.0 else 1
+                                if not hit or side != sides[reg[k]] or abs(tk) > depth[b, side, cell] + margin:
+                                    ok = False
+                                    break
+                                pos[k] = tk
+                            if not ok:
+                                continue
+                            # e is inner; the other inner edge is the nearest on the side holding two
+                            two_side = 0 if behind == 1 else 1
+                            other = -1
+                            nearest = np.inf
+                            for k in range(3):
+                                if sides[reg[k]] == two_side and abs(pos[k]) < nearest:
+                                    nearest = abs(pos[k])
+                                    other = gen[k]
+                            if other < e:
+                                continue
+                            if _edge_pierced(e, d, vertices, edges, ef_off, ef_inward, delta) or _edge_pierced(
+                                other, d, vertices, edges, ef_off, ef_inward, delta
+                            ):
+                                continue
+                            # the outer edges must not leave into their object's inside
+                            entering = False
+                            for k in range(3):
+                                lowest = True
+                                highest = True
+                                for k2 in range(3):
+                                    if k2 != k and pos[k2] < pos[k]:
+                                        lowest = False
+                                    if k2 != k and pos[k2] > pos[k]:
+                                        highest = False
+                                if not (lowest or highest):
+                                    continue
+                                n_others = 0
+                                for k2 in range(3):
+                                    if k2 != k:
+                                        for c in range(3):
+                                            others[n_others, c] = start[c] + pos[k2] * d[c]
+                                        n_others += 1
+                                for c in range(3):
+                                    others[2, c] = start[c]
+                                    u[c] = d[c] if lowest else -d[c]
+                                if _enters_object(False, gen[k], u, others, 3, vertex_object, edge_object,
+                                                  object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face,
+                                                  normals, plane_offsets, margin, delta):  # fmt: skip
+                                    entering = True
+                                    break
+                            if entering:
+                                continue
+                            if lazy and not _line_meets(start, d, src, points, offsets, normals, plane_offsets,
+                                                        edge_out, tol, angle_tol):  # fmt: skip
+                                continue
+                            four[0] = e
+                            four[1] = fx
+                            four[2] = fy
+                            four[3] = fz
+                            four.sort()
+                            out = _push(out, count, CANDIDATE_E4, -1, -1, four[0], four[1], four[2], four[3], start, d)
+                            count += 1
+    return _trim(out, count)
+
+
+@njit(cache=True)
+def _share_vertex(edges, f, g):
+    return edges[f, 0] == edges[g, 0] or edges[f, 0] == edges[g, 1] or edges[f, 1] == edges[g, 0] or \
+        edges[f, 1] == edges[g, 1]  # fmt: skip
