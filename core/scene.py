@@ -43,6 +43,8 @@ class Scene:
     normals (P, 3) unit; plane_offsets (P,): normals[i] . x + plane_offsets[i] = 0 on polygon i;
     areas (P,); centroids (P, 3) area centroids; polygon_min, polygon_max (P, 3) bounding boxes;
     reflectance (P, 3) in [0, 1); emission (P, 3) exitance W/m^2; object_ids (P,) int64; two_sided (P,) bool;
+    solid (P,) bool: polygons of closed objects whose normals point outwards (from outside, whatever the
+    object hides is hidden by its faces turned towards the viewer);
     edges (E, 2) int64 vertex ids, first < second; edge_kind (E,) int8 (EDGE_*);
     edge_face_offsets (E+1,), edge_faces: CSR of the polygons adjacent to each edge;
     vertex_kind (V,) int8 (VERTEX_*); bbox_min, bbox_max (3,); diagonal; tol.
@@ -64,6 +66,7 @@ class Scene:
     emission: np.ndarray
     object_ids: np.ndarray
     two_sided: np.ndarray
+    solid: np.ndarray
     edges: np.ndarray
     edge_kind: np.ndarray
     edge_face_offsets: np.ndarray
@@ -188,6 +191,9 @@ class Scene:
             emission=exitance[source],
             object_ids=object_of_piece,
             two_sided=sides_out,
+            solid=_solid_objects(
+                object_of_piece, edges, edge_face_offsets, edge_faces, closed_edges, normals, centroids, areas, tol
+            ),
             edges=edges,
             edge_kind=edge_kind,
             edge_face_offsets=edge_face_offsets,
@@ -491,6 +497,25 @@ def _connected_components(loops: list[np.ndarray], n_vertices: int) -> np.ndarra
     polygon_labels = labels[: len(loops)]
     _, dense = np.unique(polygon_labels, return_inverse=True)
     return dense.astype(np.int64)
+
+
+def _solid_objects(
+    object_ids, edges, edge_face_offsets, edge_faces, closed_edges, normals, centroids, areas, tol: Tolerance
+):
+    """solid per polygon: its object is closed (every edge between two of its faces, walked both ways) and
+    encloses a positive volume (divergence theorem: V = sum A (c . n) / 3, here taken about the object's first
+    centroid so that far-off scenes do not cancel), so its normals point outwards. A flat closed object (two
+    faces back to back) encloses nothing and is not solid."""
+    closed = ~_open_objects(object_ids, edges, edge_face_offsets, edge_faces, closed_edges)
+    count = int(object_ids.max()) + 1
+    anchor = np.zeros((count, 3))
+    anchor[object_ids[::-1]] = centroids[::-1]
+    heights = np.einsum("ij,ij->i", centroids - anchor[object_ids], normals)
+    volume = np.zeros(count)
+    surface = np.zeros(count)
+    np.add.at(volume, object_ids, areas * heights / 3.0)
+    np.add.at(surface, object_ids, areas)
+    return closed & (volume[object_ids] > tol.length * surface[object_ids])
 
 
 def _open_objects(object_ids, edges, edge_face_offsets, edge_faces, closed_edges) -> np.ndarray:

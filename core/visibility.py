@@ -10,13 +10,14 @@ the projections are subtracted from the source (clipped to the receiver's hemisp
 The visible region is a set of disjoint convex pieces; every piece edge carries its generator: an edge of the
 source, an edge of a blocker (an EV swath through the point), the intersection of a blocker's face with the
 source's plane, or the receiver's horizon. Lambert's sum over the pieces is the exact form factor: the edges
-shared by two pieces cancel. Candidate blockers come from shaft culling over the scene's BVH.
+shared by two pieces cancel. Candidate blockers come from shaft culling over the scene's BVH; the faces of a solid
+object turned away from the point are skipped (its faces turned towards the point hide everything they would).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numba.typed import List
 
 from .bvh import build_bvh, bvh_collect_in_planes
@@ -196,19 +197,20 @@ def _scene_arrays(scene: Scene):
         scene.normals,
         scene.plane_offsets,
         scene.areas,
+        scene.solid,
     )
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _form_factors(
-    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas,
+    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
 ):
     count = len(points)
     result = np.empty(count)
-    for i in range(count):
+    for i in prange(count):
         pieces_xy, _, frame = _point_view(
-            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas,
+            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
         )
         result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
@@ -449,7 +451,7 @@ def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
 
 @njit(cache=True)
 def _point_view(
-    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, areas,
+    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
 ):
     """Visible pieces of `source` from `point`, in the source's 2-D frame.
@@ -532,7 +534,8 @@ def _point_view(
             continue
         polygon = corners[offsets[blocker] : offsets[blocker + 1]]
         nb = poly_normals[blocker]
-        if abs(nb[0] * point[0] + nb[1] * point[1] + nb[2] * point[2] + plane_offsets[blocker]) <= eps:
+        facing = nb[0] * point[0] + nb[1] * point[1] + nb[2] * point[2] + plane_offsets[blocker]
+        if abs(facing) <= eps:
             continue
         below = True
         above = True
@@ -555,6 +558,9 @@ def _point_view(
                 continue
             projected, projected_labels = _footprint(polygon, blocker, origin, u, v, radius, eps2)
         elif below or above:
+            continue
+        elif solid[blocker] and facing < 0.0:
+            # a solid's faces turned away from the point are behind the faces turned towards it
             continue
         else:
             projected, projected_labels = _project_blocker(

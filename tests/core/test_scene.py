@@ -81,6 +81,23 @@ def test_closed_box_edges_vertices_and_sides():
     assert np.all(centre_side > 0)  # outward normals
 
 
+@pytest.mark.parametrize("offset", [0.0, 1e4])
+def test_solid_objects_are_closed_with_outward_normals(offset):
+    corners, quads = box_quads(np.full(3, offset), np.full(3, offset + 1.0))
+    outward = build(corners, quads)
+    assert outward.solid.all()
+    inward = build(corners, [q[::-1] for q in quads])
+    assert not inward.solid.any()  # normals pointing in: its faces turned away from a viewer are the ones it sees
+    open_box = build(corners, quads[1:])
+    assert not open_box.solid.any()
+    # two faces back to back close every edge but enclose nothing
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]) + offset
+    flat = build(square, [[0, 1, 2, 3], [3, 2, 1, 0]])
+    assert not flat.solid.any()
+    mixed = build(np.vstack([corners, square]), quads + [[8, 9, 10, 11]])
+    np.testing.assert_array_equal(mixed.solid, [True] * 6 + [False])
+
+
 def test_flat_vertex_inside_coplanar_grid():
     vertices = np.array([[x, y, 0.0] for y in range(3) for x in range(3)])
     quads = [[0, 1, 4, 3], [1, 2, 5, 4], [3, 4, 7, 6], [4, 5, 8, 7]]
