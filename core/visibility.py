@@ -73,7 +73,8 @@ def exact_form_factors(scene: Scene, points, normals, source: int, blockers=None
     _check_source(scene, source)
     allowed = _allowed_mask(scene, blockers)
     tree = bvh if bvh is not None else scene_bvh(scene)
-    return _form_factors(pts, nrm, source, allowed, *_scene_arrays(scene), *tree.arrays, scene.tol.length)
+    arrays = _scene_arrays(scene, allowed, source)
+    return _form_factors(pts, nrm, source, allowed, *arrays, *tree.arrays, scene.tol.length)
 
 
 def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None) -> View:
@@ -86,7 +87,7 @@ def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None
     allowed = _allowed_mask(scene, blockers)
     tree = bvh if bvh is not None else scene_bvh(scene)
     pieces_xy, pieces_gen, frame = _point_view(
-        pts[0], nrm[0], source, allowed, *_scene_arrays(scene), *tree.arrays, scene.tol.length
+        pts[0], nrm[0], source, allowed, *_scene_arrays(scene, allowed, source), *tree.arrays, scene.tol.length
     )
     origin, u, v, scale = frame[0], frame[1], frame[2], frame[3][0]
     pieces = [origin + scale * (xy[:, :1] * u + xy[:, 1:2] * v) for xy in pieces_xy]
@@ -190,15 +191,25 @@ def scene_bvh(scene: Scene):
     return cached[1]
 
 
-def _scene_arrays(scene: Scene):
+def _scene_arrays(scene: Scene, allowed, source: int):
     return (
         scene.polygon_offsets,
         scene.polygon_points,
         scene.normals,
         scene.plane_offsets,
         scene.areas,
-        scene.solid,
+        _complete_solids(scene, allowed, source),
     )
+
+
+def _complete_solids(scene: Scene, allowed, source: int) -> np.ndarray:
+    """(P,) bool: scene.solid, kept only for objects whose faces all block (or are the source): skipping a solid's
+    faces turned away from the point relies on the faces turned towards it being there to block first."""
+    present = allowed.copy()
+    present[source] = True
+    incomplete = np.zeros(int(scene.object_ids.max()) + 1, dtype=np.bool_)
+    incomplete[scene.object_ids[~present]] = True
+    return scene.solid & ~incomplete[scene.object_ids]
 
 
 @njit(cache=True, parallel=True)

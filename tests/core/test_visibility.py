@@ -5,7 +5,7 @@ from core.errors import SceneError
 from core.formfactor import point_polygon_ff
 from core.scene import Scene
 from core.visibility import HORIZON, exact_form_factors, exact_view
-from tests.core.furnished_rooms import free_points, furnished_room
+from tests.core.furnished_rooms import box_quads, free_points, furnished_room
 from tests.core.naive_visibility import oracle_form_factor
 
 
@@ -146,6 +146,27 @@ def test_blocker_subset_and_bad_input():
         exact_form_factors(scene, point, [[0.0, 0.0, 0.0]], 0)
     with pytest.raises(SceneError, match="finite"):
         exact_form_factors(scene, [[np.nan, 0.0, 0.0]], normal, 0)
+
+
+def test_blocker_subset_missing_a_face_of_a_solid():
+    """Leaving a face of a closed box out of the blockers leaves the box open: its faces turned away from the
+    point block again (the shapely oracle sees exactly the listed blockers)."""
+    corners, quads = box_quads([0.2, 0.2, 1.0], [0.8, 0.8, 1.4])
+    light = np.array([[0.0, 0.0, 3.0], [0.0, 1.0, 3.0], [1.0, 1.0, 3.0], [1.0, 0.0, 3.0]])
+    floor = np.array([[-1.0, -1.0, 0.0], [2.0, -1.0, 0.0], [2.0, 2.0, 0.0], [-1.0, 2.0, 0.0]])
+    vertices = np.concatenate([light, floor, corners])
+    polygons = [[0, 1, 2, 3], [4, 5, 6, 7]] + [[8 + i for i in quad] for quad in quads]
+    scene = Scene.from_polygons(vertices, polygons, np.full((8, 3), 0.5), np.zeros((8, 3)))
+    assert scene.solid[2:].all()
+    rng = np.random.default_rng(3)
+    points = np.column_stack([rng.uniform(-0.5, 1.5, 40), rng.uniform(-0.5, 1.5, 40), np.zeros(40)])
+    normals = np.tile([0.0, 0.0, 1.0], (40, 1))
+    for missing in range(2, 8):
+        kept = [j for j in range(2, 8) if j != missing]
+        ours = exact_form_factors(scene, points, normals, 0, blockers=kept)
+        walls = [scene.polygon(j) for j in kept]
+        oracle = [oracle_form_factor(p, n, light, walls) for p, n in zip(points, normals, strict=True)]
+        np.testing.assert_allclose(ours, oracle, rtol=0, atol=1e-9)
 
 
 def test_agrees_with_monte_carlo_within_error_bars():
