@@ -22,6 +22,7 @@ from numba import njit
 from ..bvh import build_bvh
 from ..errors import CancelledError, SceneError, VisradError
 from ..formfactor import clip_to_hemisphere, lambert_sum
+from ..raycast import CONTACT_VERTEX, _contact_arc, _perpendicular_frame
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
@@ -153,6 +154,11 @@ class Skeleton:
             scene.edge_face_offsets, scene.edge_faces, topo.face_group,
         )  # fmt: skip
         order = np.lexsort((arc, second, first))
+        self._arc_free = _arcs_leave_freely(
+            arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
+            scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
+            topo.vertex_faces, topo.vertex_face_corner, scene.tol.cosine,
+        )  # fmt: skip
         self._pair_first = first[order]
         self._pair_second = second[order]
         self._pair_arcs = arc[order]
@@ -180,6 +186,7 @@ class Skeleton:
         """Bytes held by nodes, arcs, kept incidences and the indexes."""
         arrays = [*vars(self.nodes).values(), *vars(self.arcs).values(), *vars(self._incidence_parts[0]).values()]
         arrays += [self._vertex_arcs, self._vertex_offsets, self._pair_first, self._pair_second, self._pair_arcs]
+        arrays.append(self._arc_free)
         return int(sum(a.nbytes for a in arrays))
 
     # ------------------------------------------------------------------------------------------------------
@@ -313,48 +320,54 @@ class Skeleton:
         return self._loops(vertex, source, group)
 
     def _loops(self, vertex: int, source: int, group: int) -> list[np.ndarray]:
-        scene, arcs = self.scene, self.arcs
+        """The view of `source` (face group `group`) from scene vertex `vertex`, chained from its arcs.
+
+        Its boundary is traced by the EV arcs (vertex, e) whose lines leave the vertex into free space and
+        either graze a blocker edge e and end on the source, or meet an edge e of the source that the lines just
+        inside it reach (seed 003 section 4.1). The horizons of the vertex's own faces are such arcs too: lines
+        sliding over a face of the vertex to its far edge. Each arc's end nodes are corners of the view."""
+        scene, arcs, topo = self.scene, self.arcs, self.topology
         nv = scene.n_vertices
         apex = scene.vertices[vertex]
         normal = scene.normals[source]
         offset = scene.plane_offsets[source]
+        if abs(normal @ apex + offset) <= scene.tol.length:
+            # a surface is seen edge-on from its own plane: it subtends no solid angle
+            return []
         candidates = self._vertex_arcs[self._vertex_offsets[vertex] : self._vertex_offsets[vertex + 1]]
-        traces: dict[tuple, list] = {}
-        for arc in candidates:
-            edge = int(arcs.codes[arc, 1]) - nv
-            faces = scene.edge_faces[scene.edge_face_offsets[edge] : scene.edge_face_offsets[edge + 1]]
-            own = faces[self.topology.face_group[faces] == group]
-            if arcs.end[arc, 1] != group and len(own) == 0:
-                continue
-            traces.setdefault((edge, int(arcs.end[arc, 1])), []).append(arc)
+        edges = arcs.codes[candidates, 1] - nv
+        related = (arcs.end[candidates, 1] == group) | self._edge_touches_group(edges, group)
         segments = []
-        for (edge, _), pieces in traces.items():
-            pieces.sort(key=lambda arc: arcs.s[arc, 0])
-            merged = []
-            for arc in pieces:
-                s0, s1 = arcs.s[arc]
-                n0, n1 = arcs.node[arc]
-                # pieces split where only the far side behind the vertex changes (a face plane of the vertex,
-                # an FvE node) abut on the same trace
-                if merged and (merged[-1][1] == s0 or (merged[-1][3] < 0 and n0 < 0)):
-                    merged[-1] = (merged[-1][0], s1, merged[-1][2], n1)
-                else:
-                    merged.append((s0, s1, n0, n1))
-            for s0, s1, n0, n1 in merged:
-                if n0 < 0 or n1 < 0:
-                    raise VisradError(
-                        f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
-                        f"{edge} lacks a node (build the skeleton completely or report the scene)"
-                    )
-                a, b = scene.vertices[scene.edges[edge]]
-                p0 = _onto_plane(apex, a + s0 * (b - a), normal, offset)
-                p1 = _onto_plane(apex, a + s1 * (b - a), normal, offset)
-                if _visible_on_left(scene, self.topology, edge, group, apex, p0, p1, normal):
-                    segments.append((n0, n1, p0, p1))
-                else:
-                    segments.append((n1, n0, p1, p0))
-        segments += _horizon_segments(scene, self.topology, segments, vertex, normal)
+        for arc, edge in zip(candidates[related], edges[related], strict=True):
+            side = _seen_side(scene, topo, int(edge), group, apex, int(arcs.end[arc, 1]))
+            if side == 0:
+                continue
+            if arcs.dangling[arc]:
+                raise VisradError(
+                    f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
+                    f"{edge} lacks a node (build the skeleton completely or report the scene)"
+                )
+            if not self._arc_free[arc]:
+                continue
+            s0, s1 = arcs.s[arc]
+            n0, n1 = arcs.node[arc]
+            a, b = scene.vertices[scene.edges[edge]]
+            p0 = _onto_plane(apex, a + s0 * (b - a), normal, offset)
+            p1 = _onto_plane(apex, a + s1 * (b - a), normal, offset)
+            if _seen_on_left(apex, a, b, 0.5 * (s0 + s1), normal, offset, side):
+                segments.append((n0, n1, p0, p1))
+            else:
+                segments.append((n1, n0, p1, p0))
         return _chain(segments, vertex, source)
+
+    def _edge_touches_group(self, edges: np.ndarray, group: int) -> np.ndarray:
+        """(K,) bool: which of the edges (K,) int64 bound a polygon of face group `group`."""
+        scene = self.scene
+        groups = self.topology.face_group[scene.edge_faces]
+        hit = np.zeros(len(scene.edges), dtype=np.bool_)
+        owner = np.repeat(np.arange(len(scene.edges)), np.diff(scene.edge_face_offsets))
+        hit[owner[groups == group]] = True
+        return hit[edges]
 
     def form_factor(self, vertex: int, source: int, receiver: int) -> float:
         """Exact occluded form factor from scene vertex `vertex`, with the normal of `receiver` (a polygon using
@@ -554,27 +567,70 @@ def _onto_plane(apex: np.ndarray, through: np.ndarray, normal: np.ndarray, offse
     return apex - (normal @ apex + offset) / (normal @ direction) * direction
 
 
-def _visible_on_left(scene: Scene, topology, edge: int, group: int, apex, p0, p1, normal) -> bool:
-    """Whether the part of the source seen from apex lies left of p0 -> p1 (seen from the apex's side).
-
-    The trace of the swath (apex, edge) separates lines that reach the source from lines that hit the edge's
-    faces (a blocker edge: the seen side is away from its faces) or miss the source (the source's own edge:
-    the seen side is the source's)."""
+def _inward(scene: Scene, face: int, edge: int) -> np.ndarray:
+    """(3,) direction across `edge` into polygon `face` (in its plane, perpendicular to the edge)."""
     a, b = scene.vertices[scene.edges[edge]]
-    swath = np.cross(b - a, apex - a)
+    along = b - a if _edge_runs_forward(scene, face, edge) else a - b
+    return np.cross(scene.normals[face], along)
+
+
+def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: int) -> int:
+    """Which side of the swath (apex, edge) sees the source's face group: +1 the side its normal
+    cross(b - a, apex - a) points to, -1 the other, 0 when the swath bounds nothing of the source's view.
+
+    An edge of the source bounds its view where the lines just inside the source pass the edge's other faces:
+    in the section across the edge, a face pointing between the apex and the source hides it, and so does a
+    face running from the edge to the apex with the source behind it. A blocker edge
+    whose lines end on the source hides it on the side of its faces; faces whose plane holds the apex (the
+    face a horizon line slides over) are seen edge-on and tell nothing, and with only such faces (a lone
+    panel seen from its own corner) both sides see the source."""
+    a, b = scene.vertices[scene.edges[edge]]
+    along = b - a
+    to_apex = apex - a
+    swath = np.cross(along, to_apex)
     faces = scene.edge_faces[scene.edge_face_offsets[edge] : scene.edge_face_offsets[edge + 1]]
     own = faces[topology.face_group[faces] == group]
-    face = int(own[0]) if len(own) else int(faces[0])
-    inward = np.cross(scene.normals[face], b - a)
-    if _edge_runs_forward(scene, face, edge):
-        side = np.sign(swath @ inward)
-    else:
-        side = -np.sign(swath @ inward)
-    if not len(own):
-        side = -side
-    facing = normal if normal @ (apex - p0) > 0.0 else -normal
-    left = np.cross(facing, p1 - p0)
-    return np.sign(swath @ left) == side
+    tol = scene.tol.length
+    if len(own):
+        into_source = _inward(scene, int(own[0]), edge)
+        turn = np.sign(np.cross(to_apex, into_source) @ along)
+        for face in faces[topology.face_group[faces] != group]:
+            into_face = _inward(scene, int(face), edge)
+            if abs(scene.normals[face] @ to_apex) <= tol:
+                # the apex lies on this face's plane: the lines just inside the source leave it across the
+                # face, into the solid when the source is behind the face (a convex edge of a solid)
+                if into_face @ to_apex > 0.0 and scene.normals[face] @ into_source < 0.0:
+                    return 0
+                continue
+            if (np.sign(np.cross(to_apex, into_face) @ along) == turn
+                    and np.sign(np.cross(into_face, into_source) @ along) == turn):
+                return 0
+        return int(np.sign(swath @ into_source))
+    if end_after != group:
+        return 0
+    best = 0.0
+    side = 0
+    for face in faces:
+        if abs(scene.normals[face] @ to_apex) <= tol:
+            continue
+        lean = swath @ _inward(scene, int(face), edge)
+        if abs(lean) > best:
+            best = abs(lean)
+            side = -int(np.sign(lean))
+    return side
+
+
+def _seen_on_left(apex, a, b, s: float, normal, offset: float, side: int) -> bool:
+    """Whether the trace of the swath (apex, edge a-b) on the plane normal . x + offset = 0, walked towards
+    larger s, has the seen side (`side`, see _seen_side) on its left, looking from the apex. The walking
+    direction is the derivative of the central projection at s, so an arc of zero length is oriented too."""
+    x = a + s * (b - a)
+    rise = normal @ (x - apex)
+    height = normal @ apex + offset
+    velocity = -height / rise * (b - a) + height * (normal @ (b - a)) / (rise * rise) * (x - apex)
+    facing = normal if height > 0.0 else -normal
+    swath = np.cross(b - a, apex - a)
+    return bool(np.sign(swath @ np.cross(facing, velocity)) == side)
 
 
 def _edge_runs_forward(scene: Scene, face: int, edge: int) -> bool:
@@ -585,50 +641,60 @@ def _edge_runs_forward(scene: Scene, face: int, edge: int) -> bool:
     return ids[(k + 1) % len(ids)] == second
 
 
-def _horizon_segments(scene: Scene, topology, segments, vertex: int, normal) -> list:
-    """The pieces of boundary traced by lines lying in a face plane of the vertex (its horizons: Fv swaths,
-    seed 003 section 2.3.1): they join, along the line where that plane cuts the source's plane, the trace
-    ends that have no continuation. Walking that line with the seen region on the left, each arriving end
-    joins the next leaving end."""
-    arriving: dict[int, np.ndarray] = {}
-    leaving: dict[int, np.ndarray] = {}
-    for n0, n1, p0, p1 in segments:
-        leaving[n0] = p0
-        arriving[n1] = p1
-    loose_arrive = {n: p for n, p in arriving.items() if n not in leaving}
-    loose_leave = {n: p for n, p in leaving.items() if n not in arriving}
-    if not loose_arrive:
-        return []
-    apex = scene.vertices[vertex]
-    tol = scene.tol.length
-    added = []
-    faces = topology.vertex_faces[topology.vertex_face_offsets[vertex] : topology.vertex_face_offsets[vertex + 1]]
-    for face in faces:
-        along = np.cross(scene.normals[face], normal)
-        if along @ along == 0.0:
+@njit(cache=True)
+def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, points, offsets, normals,
+                       vf_off, vf_face, vf_corner, cosine):
+    """(A,) bool: whether the lines of each EV arc leave its vertex towards its edge into free space, not into
+    the solid the vertex bounds (interior swaths, seed 003 section 3.1). Projected along the line, the faces
+    around the vertex are sectors; counted with the sign of normal . direction, they wind -1 around every
+    direction exactly when the line enters the solid there. Constant along an arc: the winding changes only
+    where the line slides over a face of the vertex, which ends the arc at a node."""
+    result = np.ones(kind.shape[0], dtype=np.bool_)
+    starts = np.empty(64)
+    lengths = np.empty(64)
+    signs = np.empty(64)
+    bounds = np.empty(128)
+    for arc in range(kind.shape[0]):
+        if kind[arc] != ARC_EV or dangling[arc]:
             continue
-        ends = [
-            (n, p, kind)
-            for kind, table in ((0, loose_arrive), (1, loose_leave))
-            for n, p in table.items()
-            if abs(scene.normals[face] @ (p - apex)) <= 16.0 * tol * max(1.0, np.linalg.norm(p - apex) / scene.diagonal)
-        ]
-        if not ends:
+        v = codes[arc, 0]
+        e = codes[arc, 1] - n_vertices
+        t = 0.5 * (s[arc, 0] + s[arc, 1])
+        a = vertices[edges[e, 0]]
+        direction = a + t * (vertices[edges[e, 1]] - a) - vertices[v]
+        direction /= np.sqrt(direction @ direction)
+        e1, e2 = _perpendicular_frame(direction)
+        count = 0
+        for i in range(vf_off[v], min(vf_off[v + 1], vf_off[v] + 64)):
+            rate = normals[vf_face[i]] @ direction
+            if abs(rate) <= cosine:
+                continue
+            starts[count], lengths[count] = _contact_arc(
+                points, offsets, normals, vf_face[i], CONTACT_VERTEX, vf_corner[i], e1, e2
+            )
+            signs[count] = 1.0 if rate > 0.0 else -1.0
+            bounds[2 * count] = starts[count]
+            bounds[2 * count + 1] = (starts[count] + lengths[count]) % (2.0 * np.pi)
+            count += 1
+        if count == 0:
             continue
-        facing = normal if normal @ (apex - ends[0][1]) > 0.0 else -normal
-        if np.cross(facing, along) @ scene.normals[face] < 0.0:
-            along = -along
-        ends.sort(key=lambda end: end[1] @ along)
-        pending = None
-        for n, p, kind in ends:
-            if kind == 0:
-                pending = (n, p)
-            elif pending is not None:
-                added.append((pending[0], n, pending[1], p))
-                loose_arrive.pop(pending[0], None)
-                loose_leave.pop(n, None)
-                pending = None
-    return added
+        ordered = np.sort(bounds[: 2 * count])
+        enters = True
+        for k in range(2 * count):
+            lo = ordered[k]
+            hi = ordered[k + 1] if k + 1 < 2 * count else ordered[0] + 2.0 * np.pi
+            if hi - lo <= cosine:
+                continue
+            middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
+            winding = 0.0
+            for j in range(count):
+                if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
+                    winding += signs[j]
+            if winding >= 0.0:
+                enters = False
+                break
+        result[arc] = not enters
+    return result
 
 
 def _chain(segments, vertex: int, source: int) -> list[np.ndarray]:

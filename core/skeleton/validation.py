@@ -110,13 +110,19 @@ def _clip_line(origin, direction, lo, hi):
 
 @njit(cache=True)
 def _group_blocked(points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len):
-    """Whether contacts at one point close around a line of the given direction (it cannot pass there)."""
+    """Whether contacts at one point close around a line of the given (unit) direction (it cannot pass there).
+
+    A face whose plane holds the line projects along it to a ray, not a sector: it covers no direction around
+    the line, so it is left out (its sector's side would otherwise be decided by rounding, and a line sliding
+    along a face of a convex corner would count as entering the solid)."""
     members = 0
     e1, e2 = _perpendicular_frame(direction)
     for i in range(count):
         if kinds[i] == CONTACT_INTERIOR:
             return True
-        if kinds[i] == CONTACT_EDGE or kinds[i] == CONTACT_VERTEX:
+        if kinds[i] != CONTACT_EDGE and kinds[i] != CONTACT_VERTEX:
+            continue
+        if abs(_dot(normals[polys[i]], direction)) > angle_tol:
             arc_start[members], arc_len[members] = _contact_arc(
                 points, offsets, normals, polys[i], kinds[i], locals_[i], e1, e2
             )
