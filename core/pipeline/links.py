@@ -76,13 +76,14 @@ def facing_sources(scene) -> np.ndarray:
     return result
 
 
-def compute_links(scene, bvh, points, polygons, sides, facing, settings, interior=None) -> LinkSet:
+def compute_links(scene, bvh, points, polygons, sides, facing, settings, interior=None, wanted=None) -> LinkSet:
     """The links of receiver points: every source column the point can see, with its form factor.
 
     points (N, 3) float64 on their polygons; polygons (N,) int64; sides (N,) int8 FRONT/BACK; facing from
     facing_sources; interior (N, 3): a point inside the visible part of each point's polygon near it (the
     centroid of a leaf triangle around it; default the polygon's centroid), the direction of the limit taken
-    at points on a touching boundary. Links with a zero form factor (the source entirely hidden) are dropped.
+    at points on a touching boundary; wanted (N, P) bool: the only sources to link each point with (default
+    all). Links with a zero form factor (the source entirely hidden) are dropped.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     polygons = np.asarray(polygons, dtype=np.int64)
@@ -93,7 +94,10 @@ def compute_links(scene, bvh, points, polygons, sides, facing, settings, interio
     at = _inside_limit(scene, points, polygons, sides, facing, inside)
     parts = []
     for source in range(scene.n_polygons):
-        candidates = np.nonzero(facing[polygons, sides, source])[0]
+        candidates = facing[polygons, sides, source]
+        if wanted is not None:
+            candidates &= wanted[:, source]
+        candidates = np.nonzero(candidates)[0]
         if not len(candidates):
             continue
         height = at[candidates] @ scene.normals[source] + scene.plane_offsets[source]

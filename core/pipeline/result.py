@@ -8,9 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import VisradError
-
-# point-triangle pairs per batch of the point location (bounds its memory to a few tens of MB)
-_BATCH_ENTRIES = 1 << 20
+from .interpolation import locate
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,36 +42,11 @@ class Result:
         side = np.zeros(len(pts), np.int64) if sides is None else np.asarray(sides, dtype=np.int64).reshape(-1)
         if len(side) != len(pts):
             raise VisradError(f"radiosity_at: {len(pts)} points but {len(side)} sides")
-        out = np.zeros((len(pts), 3))
         keys = polys * 2 + side
-        for key in np.unique(keys):
-            idx = np.nonzero(keys == key)[0]
-            tri = self.triangles[(self.triangle_polygon * 2 + self.triangle_side) == key]
-            if not len(tri):
-                raise VisradError(f"radiosity_at: polygon {key // 2} side {key % 2} has no result triangles")
-            a, b, c = (self.vertices[tri[:, k]] for k in range(3))
-            batch = max(1, _BATCH_ENTRIES // len(tri))
-            for start in range(0, len(idx), batch):
-                part = idx[start : start + batch]
-                coords = _barycentric(a, b, c, pts[part])
-                best = np.argmax(coords.min(axis=2), axis=1)
-                w = np.clip(coords[np.arange(len(part)), best], 0.0, None)
-                w /= w.sum(axis=1, keepdims=True)
-                out[part] = np.einsum("qk,qkc->qc", w, self.radiosity[tri[best]])
-        return out
-
-
-def _barycentric(a, b, c, points) -> np.ndarray:
-    """(Q, T, 3) barycentric coordinates of points (Q, 3) in triangles a, b, c (T, 3), in each plane."""
-    e1 = b - a
-    e2 = c - a
-    d = points[:, None, :] - a[None]
-    d11 = np.einsum("ij,ij->i", e1, e1)
-    d12 = np.einsum("ij,ij->i", e1, e2)
-    d22 = np.einsum("ij,ij->i", e2, e2)
-    p1 = np.einsum("qtj,tj->qt", d, e1)
-    p2 = np.einsum("qtj,tj->qt", d, e2)
-    den = d11 * d22 - d12 * d12
-    v = (d22 * p1 - d12 * p2) / den
-    w = (d11 * p2 - d12 * p1) / den
-    return np.stack([1.0 - v - w, v, w], axis=2)
+        triangle_keys = self.triangle_polygon * 2 + self.triangle_side
+        missing = np.setdiff1d(keys, triangle_keys)
+        if len(missing):
+            key = int(missing[0])
+            raise VisradError(f"radiosity_at: polygon {key // 2} side {key % 2} has no result triangles")
+        best, _, weights = locate(self.vertices, self.triangles, triangle_keys, pts, keys)
+        return np.einsum("qk,qkc->qc", weights, self.radiosity[self.triangles[best]])

@@ -32,9 +32,12 @@ from scipy.sparse.linalg import splu
 from ..errors import CancelledError, VisradError
 from ..hierarchy import Hierarchy
 from ..visibility import scene_bvh
+from .checks import LeafChecks, carry, complete_steps, measure
 from .contact import contact_regions, covered_fraction, inside_regions
+from .interpolation import locate
 from .links import BACK, FRONT, LinkSet, compute_links, facing_sources
 from .maxima import transfer_maxima
+from .oracle import exact_transfers
 from .perception import LUMINANCE_WEIGHTS, radiosity_threshold
 from .result import Result
 from .settings import Settings
@@ -42,6 +45,11 @@ from .settings import Settings
 Progress = Callable[[str, float], None]
 # receiver points linked per chunk: progress and cancel get a say this often
 _LINK_CHUNK = 2048
+# what the transfers a refined vertex inherits instead of linking may cost together (oracle.py): half the JND, so
+# that what the refinement test checks exactly still decides, and at most a fraction of the local radiosity, so
+# that the energy balance holds where the JND is a large part of the radiosity (dim scenes)
+_INHERIT_JND = 0.5
+_INHERIT_RELATIVE = 0.002
 Cancel = Callable[[], bool]
 
 
@@ -54,6 +62,7 @@ class _Lighting:
     radiosity: np.ndarray  # (2 N, 3) rows 2 v + side
     sources: np.ndarray  # (2 P, 3) radiosity each polygon side radiates (the pull X)
     threshold: float
+    checks: LeafChecks | None = None  # of the hierarchy's leaves, once a refinement test ran
 
 
 class Solver:
@@ -86,6 +95,7 @@ class Solver:
         emission = np.repeat(scene.emission, 2, axis=0)
         emission[1::2] *= scene.two_sided[:, None]
         self._emission = emission  # (2 P, 3) per polygon side
+        self._emitters = (scene.emission > 0.0).any(axis=1)
 
     # ------------------------------------------------------------------ stages
 
@@ -149,7 +159,22 @@ class Solver:
         state = self.lighting
         hierarchy = copy.deepcopy(state.hierarchy)
         mesh = hierarchy.export_leaves()
-        errors, worst = self._leaf_errors(state, mesh)
+        checks = state.checks
+        if checks is None:
+            checks = LeafChecks.fresh(mesh.triangles, self._exact_transfers(state, mesh))
+        sampling = complete_steps(checks, mesh, self.scene, self.bvh, self.facing, self.settings)
+        while True:
+            try:
+                yield 0.3 * next(sampling)
+            except StopIteration as done:
+                checks = done.value
+                break
+        gather = self._gather_matrix(state.links, len(state.radiosity))
+        visible = self._visible_triangles(mesh)
+        errors, worst, per_source = measure(
+            checks, mesh, gather, state.sources, self.scene.reflectance, self.scene.two_sided, visible
+        )
+        exact = self._exact_transfers(state, mesh, checks.live, per_source)
         yield 0.3
         bad = errors >= state.threshold
         refined = np.unique(mesh.triangle_element[bad])
@@ -175,9 +200,10 @@ class Solver:
         hierarchy.complete_step()
         yield 0.4
         parts = [state.links]
-        for fraction in self._link_new_vertices(hierarchy, parts, len(state.radiosity) // 2):
+        for fraction in self._link_refined_vertices(hierarchy, state, mesh, exact, parts):
             yield 0.4 + 0.5 * fraction
-        self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts))
+        checks = carry(checks, mesh, exact, hierarchy.export_leaves(), self._emitters)
+        self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts), checks)
         self.iterations += 1
         record["vertices"] = hierarchy.vertex_count
         self.refinement_log.append(record)
@@ -271,6 +297,62 @@ class Solver:
             parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
             yield stop / len(rows)
 
+    def _link_refined_vertices(self, hierarchy: Hierarchy, state: _Lighting, old_mesh, exact, parts: list):
+        """Append to `parts` the links of the vertices refinement created (section 4.2, lazily): exact links to
+        the sources `exact` (T, P) marks for the old leaf each vertex was inserted in (both leaves for a vertex on
+        their shared edge), and for every other source the barycentric combination of that leaf's corners'
+        effective form factors. Yields the fraction done."""
+        first = len(state.radiosity) // 2
+        rows, polygons = self._vertex_sides(hierarchy, first)
+        if not len(rows):
+            yield 1.0
+            return
+        vertex = rows // 2
+        side = rows % 2
+        positions = hierarchy.vertex_positions()[vertex]
+        interior = self._vertex_interiors(hierarchy)[vertex]
+        best, other, weights = locate(
+            old_mesh.vertices, old_mesh.triangles, old_mesh.triangle_polygon, positions, polygons
+        )
+        wanted = exact[best] | np.where((other >= 0)[:, None], exact[np.maximum(other, 0)], False)
+        corners = 2 * old_mesh.triangles[best] + side[:, None]
+        spread = sp.csr_matrix(
+            (weights.ravel(), (np.repeat(np.arange(len(rows)), 3), corners.ravel())),
+            shape=(len(rows), len(state.radiosity)),
+        )
+        inherited = (spread @ self._gather_matrix(state.links, len(state.radiosity))).tocoo()
+        keep = ~wanted[inherited.row, inherited.col // 2] & (inherited.data != 0.0)
+        parts.append(LinkSet(rows[inherited.row[keep]], inherited.col[keep].astype(np.int64), inherited.data[keep]))
+        for start in range(0, len(rows), _LINK_CHUNK):
+            stop = min(start + _LINK_CHUNK, len(rows))
+            new = compute_links(
+                self.scene, self.bvh, positions[start:stop], polygons[start:stop], side[start:stop], self.facing,
+                self.settings, interior[start:stop], wanted[start:stop],
+            )  # fmt: skip
+            parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
+            yield stop / len(rows)
+
+    def _exact_transfers(self, state: _Lighting, mesh, live=None, measured=None) -> np.ndarray:
+        """(T, P) bool: the sources each leaf triangle's new vertices and samples link exactly (oracle.py)."""
+        corners = mesh.vertices[mesh.triangles]
+        centres = corners.mean(axis=1)
+        radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
+        return exact_transfers(
+            centres, radii, self.scene.reflectance[mesh.triangle_polygon], self.scene, state.sources, self._emitters,
+            self._inherit_allowance(state, mesh), live, measured,
+        )  # fmt: skip
+
+    def _inherit_allowance(self, state: _Lighting, mesh) -> np.ndarray:
+        """(T,) the luminance-weighted radiosity error the transfers inherited in each leaf may add up to."""
+        luminance = (state.radiosity @ LUMINANCE_WEIGHTS).reshape(-1, 2).max(axis=1)
+        local = luminance[mesh.triangles].mean(axis=1)
+        return np.minimum(_INHERIT_JND * state.threshold, _INHERIT_RELATIVE * local)
+
+    def _gather_matrix(self, links: LinkSet, n_rows: int):
+        """(n_rows, 2 P) sparse effective form factors of the links."""
+        shape = (n_rows, 2 * self.scene.n_polygons)
+        return sp.csr_matrix((links.form_factor, (links.point, links.column)), shape=shape)
+
     def _vertex_interiors(self, hierarchy: Hierarchy) -> np.ndarray:
         """(N, 3): for every vertex the centroid of a visible leaf triangle around it (of any, when none is)."""
         mesh = hierarchy.export_leaves()
@@ -282,11 +364,11 @@ class Solver:
                 interior[mesh.triangles[chosen, k]] = centroids[chosen]
         return interior
 
-    def _gathered(self, hierarchy: Hierarchy, links: LinkSet) -> _Lighting:
+    def _gathered(self, hierarchy: Hierarchy, links: LinkSet, checks: LeafChecks | None = None) -> _Lighting:
         """Solve for the radiosity at every vertex side given the links."""
         n_rows = 2 * hierarchy.vertex_count
         n_cols = 2 * self.scene.n_polygons
-        gather = sp.csr_matrix((links.form_factor, (links.point, links.column)), shape=(n_rows, n_cols))
+        gather = self._gather_matrix(links, n_rows)
         pull = self._pull_matrix(hierarchy, n_rows, n_cols)
         row_polygon = np.repeat(hierarchy.vertex_polygon(), 2)
         rho = self.scene.reflectance[row_polygon]
@@ -309,7 +391,7 @@ class Solver:
         areas = self.scene.areas
         adaptation = (areas[:, None] * average).sum(axis=0) / areas.sum()
         threshold = radiosity_threshold(adaptation, self.settings)
-        return _Lighting(hierarchy, links, radiosity, sources, threshold)
+        return _Lighting(hierarchy, links, radiosity, sources, threshold, checks)
 
     def _pull_matrix(self, hierarchy: Hierarchy, n_rows: int, n_cols: int):
         """(2 P, 2 N) sparse: each polygon side's area-weighted average of its leaf triangles' vertex means."""
@@ -326,60 +408,6 @@ class Solver:
         rows = np.concatenate([2 * polygon, 2 * polygon + 1])
         cols = np.concatenate([2 * vertex, 2 * vertex + 1])
         return sp.csr_matrix((np.concatenate([weight, weight]), (rows, cols)), shape=(n_cols, n_rows))
-
-    def _exact_radiosity(self, state: _Lighting, points, polygons, sides, interior) -> np.ndarray:
-        """Radiosity gathered at surface points (M, 3) from the current sources, (M, 3); interior (M, 3) as
-        in compute_links."""
-        links = compute_links(self.scene, self.bvh, points, polygons, sides, self.facing, self.settings, interior)
-        gather = sp.csr_matrix(
-            (links.form_factor, (links.point, links.column)), shape=(len(points), len(state.sources))
-        )
-        column = 2 * polygons + sides
-        return self._emission[column] + self.scene.reflectance[polygons] * (gather @ state.sources)
-
-    def _leaf_errors(self, state: _Lighting, mesh) -> tuple:
-        """Per leaf triangle: the largest perceptible error (luminance-weighted W/m^2) of the linear
-        interpolation at its centroid and edge midpoints, over its sides, and the worst sample (T, 3)."""
-        tri = mesh.triangles
-        count = len(tri)
-        edges = np.sort(np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
-        unique_edges, edge_of = np.unique(edges, axis=0, return_inverse=True)
-        edge_of = edge_of.reshape(count, 3)
-        positions = mesh.vertices
-        centroid = positions[tri].mean(axis=1)
-        midpoint = positions[unique_edges].mean(axis=1)
-        edge_polygon = mesh.vertex_polygon[unique_edges[:, 0]]
-        errors = np.zeros(count)
-        worst = centroid.copy()
-        worst_error = np.full(count, -1.0)
-        for side in (FRONT, BACK):
-            on_side = np.ones(count, bool) if side == FRONT else self.scene.two_sided[mesh.triangle_polygon]
-            if not on_side.any():
-                continue
-            values = state.radiosity[side::2]
-            t_idx = np.nonzero(on_side)[0]
-            e_idx = np.unique(edge_of[t_idx])
-            poly_c = mesh.triangle_polygon[t_idx]
-            exact_c = self._exact_radiosity(state, centroid[t_idx], poly_c, np.full(len(t_idx), side), centroid[t_idx])
-            edge_interior = np.zeros((len(unique_edges), 3))
-            edge_interior[edge_of[t_idx].ravel()] = np.repeat(centroid[t_idx], 3, axis=0)
-            exact_m = np.zeros((len(unique_edges), 3))
-            exact_m[e_idx] = self._exact_radiosity(
-                state, midpoint[e_idx], edge_polygon[e_idx], np.full(len(e_idx), side), edge_interior[e_idx]
-            )
-            err_c = np.abs(exact_c - values[tri[t_idx]].mean(axis=1)) @ LUMINANCE_WEIGHTS
-            mid_interp = values[unique_edges].mean(axis=1)
-            err_m = np.abs(exact_m - mid_interp) @ LUMINANCE_WEIGHTS
-            candidates = np.concatenate([err_c[:, None], err_m[edge_of[t_idx]]], axis=1)
-            best = np.argmax(candidates, axis=1)
-            value = candidates[np.arange(len(t_idx)), best]
-            better = value > worst_error[t_idx]
-            chosen = np.where(best[:, None] == 0, centroid[t_idx], midpoint[edge_of[t_idx, np.maximum(best - 1, 0)]])
-            worst[t_idx[better]] = chosen[better]
-            worst_error[t_idx[better]] = value[better]
-            errors[t_idx] = np.maximum(errors[t_idx], value)
-        errors[~self._visible_triangles(mesh)] = 0.0
-        return errors, worst
 
     def _visible_triangles(self, mesh) -> np.ndarray:
         """(T,) bool: leaf triangles not hidden by contact (their polygon covered, or inside a contact piece)."""
