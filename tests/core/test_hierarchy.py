@@ -1,17 +1,25 @@
 """Hierarchical triangulations and lazy-wavelet push-pull (issue 4; seed 000 sections 3, 4.2.2, 6.2)."""
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
-from core.hierarchy import ANGLE_BINS, GridSettings, Hierarchy
+from core.hierarchy import ANGLE_BINS, GridSettings, Hierarchy, ShapeSettings
 from core.tolerance import Tolerance
 from tests.core.naive_hierarchy import (
     barycentric_3d,
     conformity_problems,
+    constrained_delaunay_violations,
+    edges_on_segments,
+    forced_angle,
+    near_segments,
     piecewise_linear,
+    plane_coordinates,
     polygon_area,
     polygon_centroid,
     polygon_normal,
+    smallest_angles,
     triangle_area,
 )
 
@@ -66,10 +74,11 @@ def random_segments_on(polygon, count, rng):
 
 def refine_randomly(h, polygons, rng, steps, items_per_step, grid_steps=1):
     """Regular grid steps, then steps of random points and random segments (crossing each other and
-    the polygons' sides, clipped)."""
+    the polygons' sides, clipped). Returns the segments inserted into each polygon: list of (S, 2, 3)."""
     for _ in range(grid_steps):
         h.queue_regular_grid(h.leaves())
         h.complete_step()
+    inserted = [[np.zeros((0, 2, 3))] for _ in polygons]
     for _ in range(steps):
         owners = rng.integers(len(polygons), size=items_per_step)
         is_point = rng.random(items_per_step) < 0.5
@@ -77,8 +86,11 @@ def refine_randomly(h, polygons, rng, steps, items_per_step, grid_steps=1):
             n_points = int(np.sum((owners == p) & is_point))
             n_segments = int(np.sum((owners == p) & ~is_point))
             h.insert_points(p, random_points_in(polygons[p], n_points, rng))
-            h.insert_segments(p, random_segments_on(polygons[p], n_segments, rng))
+            segments = random_segments_on(polygons[p], n_segments, rng)
+            h.insert_segments(p, segments)
+            inserted[p].append(segments)
         h.complete_step()
+    return [np.concatenate(s) for s in inserted]
 
 
 def leaf_areas(mesh):
@@ -105,6 +117,92 @@ def check_conforming_and_area(h, polygons, relative=1e-12):
     return mesh
 
 
+def sub_triangulations(h):
+    """Every subdivided element's sub-triangulation, its children: list of (element, triangles (C, 3) int64
+    vertex ids, counter-clockwise, children (C,) int64 element ids)."""
+    parents = h.element_parent()
+    triangles, children = [], []
+    for level in range(1, int(h.element_level().max()) + 1):
+        mesh = h.export_level(level)
+        triangles.append(mesh.triangles)
+        children.append(mesh.triangle_element)
+    triangles = np.concatenate(triangles)
+    children = np.concatenate(children)
+    owners = parents[children]
+    order = np.argsort(owners, kind="stable")
+    elements, starts = np.unique(owners[order], return_index=True)
+    return list(zip(elements.tolist(), np.split(triangles[order], starts[1:]), np.split(children[order], starts[1:]),
+                    strict=True))
+
+
+@dataclass
+class SubTriangulationCheck:
+    """What check_sub_triangulations found: CDT violations as (element, triangle vertex ids, vertex id,
+    reason); the number of sub-triangulations checked; and, for every leaf (L,) in h.leaves() order, its
+    smallest angle (degrees, float64), whether a vertex of it lies on an inserted segment (bool), and the
+    angle its element's input forces (naive_hierarchy.forced_angle, float64; computed for leaves away from
+    the segments and thinner than `forced_below` only, 180 elsewhere)."""
+
+    violations: list
+    checked: int
+    leaf_angle: np.ndarray
+    leaf_on_segment: np.ndarray
+    leaf_forced: np.ndarray
+
+
+def check_sub_triangulations(h, polygons, segments, forced_below=0.0):
+    """Checks every element's sub-triangulation with naive_hierarchy, given constraints read off the geometry
+    alone: the sub-triangulation's boundary (edges of one child) and the inner edges lying on an inserted
+    segment (segments: list per polygon of (S, 2, 3)). Ends of inserted segments move by up to tol.snap onto
+    sides and vertices, at each level, hence the distance 4 snap. The angle a leaf's element input forces
+    (naive_hierarchy.forced_angle) holds only where that element's sub-triangulation passed the check."""
+    positions = h.vertex_positions()
+    element_polygon = h.element_polygon()
+    leaves = h.leaves()
+    leaf_index = np.full(h.element_count, -1)
+    leaf_index[leaves] = np.arange(len(leaves))
+    leaf_angle = np.full(len(leaves), np.nan)
+    leaf_forced = np.full(len(leaves), 180.0)
+    planar = [plane_coordinates(p, positions) for p in polygons]
+    segments_2d = [plane_coordinates(p, s.reshape(-1, 3)).reshape(-1, 2, 2) for p, s in zip(polygons, segments,
+                                                                                            strict=True)]
+    reach = 4.0 * h.tol.snap
+    mesh = h.export_leaves()
+    on_segment = np.zeros(h.vertex_count, dtype=bool)
+    for p in range(len(polygons)):
+        mine = np.nonzero(mesh.vertex_polygon == p)[0]
+        on_segment[mine] = near_segments(planar[p][mine], segments_2d[p], reach)
+    leaf_on_segment = np.zeros(len(leaves), dtype=bool)
+    np.logical_or.at(leaf_on_segment, leaf_index[mesh.triangle_element], on_segment[mesh.triangles].any(axis=1))
+    groups = sub_triangulations(h)
+    found = []
+    for element, triangles, children in groups:
+        polygon = int(element_polygon[element])
+        ids, local = np.unique(triangles, return_inverse=True)
+        local = local.reshape(-1, 3)
+        xy = planar[polygon][ids]
+        edges = np.sort(np.concatenate([local[:, [0, 1]], local[:, [1, 2]], local[:, [2, 0]]]), axis=1)
+        keys, uses = np.unique(edges[:, 0] * len(ids) + edges[:, 1], return_counts=True)
+        unique_edges = np.stack([keys // len(ids), keys % len(ids)], axis=1)
+        constrained = {frozenset(e) for e in unique_edges[uses == 1].tolist()}
+        inner = unique_edges[uses == 2]
+        candidates = segments_2d[polygon]
+        low, high = xy.min(axis=0), xy.max(axis=0)
+        overlap = np.all((candidates.max(axis=1) >= low - reach) & (candidates.min(axis=1) <= high + reach), axis=1)
+        lying = edges_on_segments(xy, inner, candidates[overlap], reach)
+        constrained |= {frozenset(e) for e in inner[lying].tolist()}
+        for t, v, reason in constrained_delaunay_violations(xy, local, constrained, h.tol.length):
+            found.append((element, ids[local[t]].tolist(), int(ids[v]), reason))
+        angle, _ = smallest_angles(xy, local)
+        mine = leaf_index[children]
+        leaf_angle[mine[mine >= 0]] = angle[mine >= 0]
+        away = mine >= 0
+        away[away] = ~leaf_on_segment[mine[away]]
+        for t in np.nonzero(away & (angle < forced_below))[0]:
+            leaf_forced[mine[t]] = forced_angle(xy, local[t], constrained, h.tol.length)
+    return SubTriangulationCheck(found, len(groups), leaf_angle, leaf_on_segment, leaf_forced)
+
+
 def print_statistics(label, h):
     s = h.statistics()
     print(f"\n{label}: {s.vertices} vertices, {s.leaves} leaf triangles, {s.elements} elements, depth max "
@@ -114,6 +212,57 @@ def print_statistics(label, h):
     print("  all leaves:                       ", s.min_angle_histogram.tolist())
     print("  leaves away from constrained segs:", s.free_min_angle_histogram.tolist())
     return s
+
+
+def print_quality(check, bound):
+    """Prints the independent quality check of the leaves: CDT violations, smallest-angle histograms."""
+    away = ~check.leaf_on_segment
+    unforced = away & (check.leaf_forced > 2.0 * check.leaf_angle)
+    print(f"  constrained Delaunay: {check.checked} sub-triangulations checked, {len(check.violations)} violations")
+    print("  leaves on no inserted segment:    ", np.histogram(check.leaf_angle[away], ANGLE_BINS)[0].tolist())
+    print(f"  of these, below {bound:g} deg and not forced within a factor 2 by their element's input:",
+          np.histogram(check.leaf_angle[unforced & (check.leaf_angle < bound)], ANGLE_BINS)[0].tolist())
+
+
+# ---------------------------------------------------------------------------------------------- checkers
+
+
+def test_constrained_delaunay_checker_sees_circles_constraints_and_shadows():
+    """The naive checker on one triangle a b c (circumcircle: unit circle) and a vertex v below a b."""
+    xy = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, -0.6], [-1.2, -0.3], [1.2, -0.3], [-0.1, -0.3],
+                   [0.1, -0.3], [0.0, -0.3], [0.0, -1.0 + 1e-12], [0.0, 0.5]])
+    triangle = np.array([[0, 1, 2]])
+    ring = {frozenset((0, 1)), frozenset((1, 2)), frozenset((2, 0))}
+    sides = {frozenset((1, 2)), frozenset((2, 0))}
+
+    def flagged(vertices, constraints):
+        """Vertices (ids into xy) flagged against triangle 0 1 2 among `vertices`, which start 0 1 2."""
+        local = {frozenset(vertices.index(v) for v in edge) for edge in constraints}
+        found = constrained_delaunay_violations(xy[vertices], triangle, local, 1e-9)
+        return sorted({vertices[v] for _, v, _ in found})
+
+    assert flagged([0, 1, 2, 3], sides) == [3]  # inside the circle, seen through a b
+    assert flagged([0, 1, 2, 3], ring) == []  # a b is a constraint
+    assert flagged([0, 1, 2, 9], sides) == []  # on the circle within the slack
+    assert flagged([0, 1, 2, 10], ring) == [10]  # inside the triangle
+    wide = sides | {frozenset((4, 5))}  # a chord below a b hiding v from all of it
+    assert flagged([0, 1, 2, 3, 4, 5], wide) == []
+    split = sides | {frozenset((4, 6)), frozenset((7, 5))}  # the same chord with a gap: v sees a b through it
+    assert 3 in flagged([0, 1, 2, 3, 4, 5, 6, 7], split)
+    joined = sides | {frozenset((4, 8)), frozenset((8, 5))}  # two pieces meeting: no gap
+    assert 3 not in flagged([0, 1, 2, 3, 4, 5, 8], joined)
+
+
+def test_forced_angle_of_a_needle_and_a_cap():
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.02], [0.25, 0.3], [0.75, 0.3], [0.5, -1.0]])
+    cap = np.array([0, 1, 2])
+    base = np.degrees(np.arctan(0.04))
+    # Cap 0 1 2 on a constrained side: some triangle on 0 1 is no higher than 2, base angles about 2.3 deg.
+    assert forced_angle(xy, cap, {frozenset((0, 1))}, 1e-9) == pytest.approx(base)
+    # Segments 3 5, 2 5 and 4 5 cross the three sides: no side is in every triangulation, nothing is proven.
+    assert forced_angle(xy, cap, set(), 1e-9) == 180.0
+    # Without 4, side 1 2 is in every triangulation: some triangle on it has an angle at most the cap's at 0.
+    assert forced_angle(xy[[0, 1, 2, 3, 5]], cap, set(), 1e-9) == pytest.approx(base)
 
 
 # ---------------------------------------------------------------------------------------------- push-pull
@@ -296,6 +445,8 @@ def test_crossing_segments_create_their_intersection_and_follow_the_segments():
     h.insert_segments(0, segments)
     h.complete_step()
     mesh = check_conforming_and_area(h, [square])
+    check = check_sub_triangulations(h, [square], [segments])
+    assert check.checked > 1 and check.violations == []
     p = segments[:, 0]
     d = segments[:, 1] - segments[:, 0]
     s, _ = np.linalg.solve(np.stack([d[0], -d[1]], axis=1)[:2], (p[1] - p[0])[:2])
@@ -325,6 +476,8 @@ def test_regular_grid_skips_points_near_a_maximum():
     step = 4.0 / 8
     assert np.sum(distance < 1e-12) == 1
     assert np.sort(distance)[1] > 0.5 * step
+    check = check_sub_triangulations(h, [square], [np.zeros((0, 2, 3))])
+    assert check.checked == 1 and check.violations == []
     s = h.statistics()
     assert s.min_angle > 20.0
     assert 60 <= s.leaves <= 200
@@ -336,6 +489,8 @@ def test_regular_grid_is_a_function_of_size():
     h = make([small, large])
     h.queue_regular_grid([0, 1], GridSettings(target_spacing_relative=0.02, min_divisions=2, max_divisions=64))
     h.complete_step()
+    check = check_sub_triangulations(h, [small, large], [np.zeros((0, 2, 3))] * 2)
+    assert check.checked == 2 and check.violations == []
     per_polygon = h.statistics().leaves_per_polygon
     assert per_polygon[1] > 20 * per_polygon[0]
     mean_area = np.array([0.04, 4.0]) / per_polygon
@@ -346,12 +501,23 @@ def test_ten_thousand_random_insertions_conform_and_keep_the_area():
     rng = np.random.default_rng(4)
     polygons = box_with_fin()
     h = make(polygons)
-    refine_randomly(h, polygons, rng, steps=10, items_per_step=1000)
+    segments = refine_randomly(h, polygons, rng, steps=10, items_per_step=1000)
     check_conforming_and_area(h, polygons)
     s = print_statistics("10 000 random insertions", h)
     assert s.leaves > 20_000
-    # Quality is reported above; the grid tests check it where the input allows it (no random points).
-    assert s.min_angle > 0.0
+    # Where the hierarchy is free to place a point it keeps its fan above the snap angle (shape.py); below it,
+    # a thin leaf must be the input's doing. Every element's sub-triangulation is constrained Delaunay, hence
+    # the best smallest angle for its input; a thin leaf on no inserted segment must moreover be forced within
+    # a factor 2 by its element's input (points on the element's sides, grid and inserted points).
+    bound = ShapeSettings().snap_angle_degrees
+    check = check_sub_triangulations(h, polygons, segments, forced_below=bound)
+    print_quality(check, bound)
+    assert check.violations == [], check.violations[:5]
+    assert check.checked > 10_000
+    away = ~check.leaf_on_segment
+    thin = away & (check.leaf_angle < bound)
+    assert away.sum() > 100 and thin.sum() > 10
+    assert np.all(check.leaf_forced[thin] <= 2.0 * check.leaf_angle[thin])
 
 
 def test_scaling_the_scene_changes_nothing():
