@@ -10,8 +10,8 @@ from ..hierarchy import GridSettings
 #: Accurate is the 1999 paper's mode (exact form factors, 2 % JND); Fast its ray-cast alternative with a
 #: coarser threshold and fewer iterations.
 PRESETS = {
-    "accurate": {"jnd": 0.02, "max_iterations": 10, "form_factors": "exact"},
-    "fast": {"jnd": 0.05, "max_iterations": 4, "form_factors": 16},
+    "accurate": {"jnd": 0.02, "max_iterations": 10, "form_factors": "exact", "discontinuities": True},
+    "fast": {"jnd": 0.05, "max_iterations": 4, "form_factors": 16, "discontinuities": False},
 }
 
 
@@ -28,6 +28,8 @@ class Settings:
         number of jittered rays per form factor (seed 000 Table 1).
     regular_levels: refinement iterations that subdivide with a regular grid (section 6.2); later ones insert
         the ranked discontinuities.
+    discontinuities: build the Visibility Skeleton for the emitters and insert their ranked visual events
+        (sections 5 and 6.4) from iteration regular_levels + 1 on; False refines at the worst samples only.
     display_max_luminance: L_dmax of Ward's operator in cd/m^2; luminous_efficacy: lm/W turning our W/m^2
         into photometric units (179 lm/W, the white-light efficacy Ward's Radiance uses).
     grid: the regular subdivision's spacing; seed: the jittered rays' seed.
@@ -38,6 +40,7 @@ class Settings:
     max_bounces: int | None = None
     form_factors: str | int = "exact"
     regular_levels: int = 2
+    discontinuities: bool = True
     display_max_luminance: float = 100.0
     luminous_efficacy: float = 179.0
     grid: GridSettings = field(default_factory=GridSettings)
@@ -56,6 +59,8 @@ class Settings:
             raise VisradError(f"Settings.form_factors must be 'exact' or a positive ray count, got {rays!r}")
         if isinstance(self.regular_levels, bool) or not isinstance(self.regular_levels, int) or self.regular_levels < 0:
             raise VisradError(f"Settings.regular_levels must be an integer >= 0, got {self.regular_levels!r}")
+        if not isinstance(self.discontinuities, bool):
+            raise VisradError(f"Settings.discontinuities must be True or False, got {self.discontinuities!r}")
         if not self.display_max_luminance > 0.0 or not self.luminous_efficacy > 0.0:
             raise VisradError("Settings.display_max_luminance and luminous_efficacy must be positive")
 

@@ -31,9 +31,11 @@ from scipy.sparse.linalg import splu
 
 from ..errors import CancelledError, VisradError
 from ..hierarchy import Hierarchy
+from ..skeleton import Skeleton
 from ..visibility import scene_bvh
 from .checks import LeafChecks, carry, complete_steps, measure
 from .contact import contact_regions, covered_fraction, inside_regions
+from .discontinuities import ReceiverEvents, clip_to_convex, crossing, event_variation, receiver_events
 from .interpolation import locate
 from .links import BACK, FRONT, LinkSet, compute_links, facing_sources
 from .maxima import transfer_maxima
@@ -50,6 +52,8 @@ _LINK_CHUNK = 2048
 # that the energy balance holds where the JND is a large part of the radiosity (dim scenes)
 _INHERIT_JND = 0.5
 _INHERIT_RELATIVE = 0.002
+# most visual events inserted into one receiver polygon per refinement iteration, highest Delta B first
+_EVENTS_PER_POLYGON = 64
 Cancel = Callable[[], bool]
 
 
@@ -86,7 +90,11 @@ class Solver:
         self.facing = None
         self.contacts: dict = {}
         self.hidden_polygons = np.zeros(scene.n_polygons, dtype=bool)
+        self.skeleton: Skeleton | None = None
         self.lighting: _Lighting | None = None
+        self.discontinuities: dict[int, list[np.ndarray]] = {}
+        self._inserted_events: set[tuple[int, int]] = set()
+        self._events: dict[int, ReceiverEvents] = {}
         self.iterations = 0
         self.converged = False
         self.stage_seconds: dict[str, float] = {}
@@ -126,7 +134,13 @@ class Solver:
 
     def build_skeleton_steps(self):
         self.bvh = scene_bvh(self.scene)
-        yield 0.5
+        yield 0.05
+        emitters = np.flatnonzero(self._emitters)
+        skeleton = None
+        if self.settings.discontinuities and len(emitters):
+            skeleton = Skeleton(self.scene)
+            for fraction in skeleton.build_steps(emitters, self.cancel):
+                yield 0.05 + 0.9 * fraction
         facing = facing_sources(self.scene)
         contacts = contact_regions(self.scene)
         uncovered = (1.0 - covered_fraction(self.scene, contacts)) * self.scene.areas
@@ -135,6 +149,8 @@ class Solver:
         facing[hidden] = False
         facing[:, :, hidden] = False
         self.facing, self.contacts, self.hidden_polygons = facing, contacts, hidden
+        self.skeleton = skeleton
+        self._events = {}
         yield 1.0
 
     def coarse_lighting_steps(self):
@@ -192,7 +208,9 @@ class Solver:
                 )
             hierarchy.queue_regular_grid(refined)
         else:
-            for triangle in np.nonzero(bad)[0]:
+            covered, inserted = self._insert_discontinuities(hierarchy, state, mesh, bad)
+            record["discontinuities"] = len(inserted)
+            for triangle in np.nonzero(bad & ~covered)[0]:
                 element = int(mesh.triangle_element[triangle])
                 polygon = int(mesh.triangle_polygon[triangle])
                 point = hierarchy.frames.to_2d(polygon, worst[triangle][None, :])
@@ -204,6 +222,10 @@ class Solver:
             yield 0.4 + 0.5 * fraction
         checks = carry(checks, mesh, exact, hierarchy.export_leaves(), self._emitters)
         self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts), checks)
+        if not regular:
+            for polygon, piece, segment in inserted:
+                self._inserted_events.add((polygon, piece))
+                self.discontinuities.setdefault(polygon, []).append(segment)
         self.iterations += 1
         record["vertices"] = hierarchy.vertex_count
         self.refinement_log.append(record)
@@ -238,7 +260,7 @@ class Solver:
             triangle_polygon=polygons,
             triangle_side=sides,
             radiosity=radiosity,
-            discontinuities={},
+            discontinuities={polygon: np.array(segments) for polygon, segments in self.discontinuities.items()},
             stats=self.stats(),
         )
 
@@ -251,9 +273,12 @@ class Solver:
             "refinement": list(self.refinement_log),
             "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
             "polygons": self.scene.n_polygons,
-            "discontinuities_inserted": 0,
-            "discontinuities_available": 0,
+            "discontinuities_inserted": len(self._inserted_events),
+            "discontinuities_available": sum(len(events.pieces) for events in self._events.values()),
         }
+        if self.skeleton is not None:
+            skeleton = self.skeleton.stats
+            out["skeleton"] = {key: skeleton[key] for key in ("nodes", "arcs", "seconds", "bytes")}
         if state is not None:
             out["links"] = len(state.links)
             out["vertices"] = state.hierarchy.vertex_count
@@ -416,6 +441,57 @@ class Solver:
             centroids = mesh.vertices[mesh.triangles].mean(axis=1)
             shown &= ~inside_regions(centroids, mesh.triangle_polygon, self.scene, self.contacts)
         return shown
+
+    def _insert_discontinuities(self, hierarchy: Hierarchy, state: _Lighting, mesh, bad: np.ndarray) -> tuple:
+        """Queue the ranked visual events of the emitters (section 6.4) onto the polygons of the leaves that
+        need refining: on each polygon the pieces of events (collinear traces merged) not inserted yet that cross
+        such a leaf and whose largest Delta B on it is perceptible, highest first. Returns ((T,) bool the leaves
+        an inserted piece crosses, [(polygon, piece, (2, 3) the piece clipped to the polygon)])."""
+        covered = np.zeros(len(mesh.triangles), dtype=bool)
+        inserted = []
+        if self.skeleton is None:
+            return covered, inserted
+        corners = mesh.vertices[mesh.triangles]
+        sizes = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+        to_2d = hierarchy.frames.to_2d
+        for polygon in np.unique(mesh.triangle_polygon[bad]).tolist():
+            events = self._receiver_events(polygon)
+            if not len(events):
+                continue
+            leaves = np.flatnonzero(bad & (mesh.triangle_polygon == polygon))
+            meets = crossing(
+                to_2d(polygon, events.pieces.reshape(-1, 3)).reshape(-1, 2, 2),
+                to_2d(polygon, corners[leaves].reshape(-1, 3)).reshape(-1, 3, 2),
+                self.scene.tol.length,
+            )
+            fresh = np.array([(polygon, g) not in self._inserted_events for g in range(len(events.pieces))])
+            candidates = np.flatnonzero(meets.any(axis=1) & fresh)
+            if not len(candidates):
+                continue
+            piece_size = np.zeros(len(events.pieces))
+            piece_size[candidates] = [sizes[leaves[meets[g]]].max() for g in candidates]
+            which = np.flatnonzero(np.isin(events.group, candidates))
+            size = piece_size[events.group[which]]
+            variation = event_variation(events, which, self.scene, polygon, state.sources, size)
+            delta = np.zeros(len(events.pieces))
+            np.maximum.at(delta, events.group[which], variation)
+            order = candidates[np.argsort(-delta[candidates], kind="stable")]
+            ranked = order[delta[order] >= state.threshold][:_EVENTS_PER_POLYGON]
+            outline = self.scene.polygon(polygon)
+            for piece in ranked.tolist():
+                segment = clip_to_convex(events.pieces[piece], outline, self.scene.normals[polygon])
+                if segment is None:
+                    continue
+                hierarchy.insert_segments(polygon, segment[None])
+                covered[leaves[meets[piece]]] = True
+                inserted.append((polygon, piece, segment))
+        return covered, inserted
+
+    def _receiver_events(self, polygon: int) -> ReceiverEvents:
+        """The visual events of the emitters on `polygon`, from the skeleton, computed once per polygon."""
+        if polygon not in self._events:
+            self._events[polygon] = receiver_events(self.skeleton, self.scene, polygon, np.flatnonzero(self._emitters))
+        return self._events[polygon]
 
     def _insert_maxima(self, hierarchy: Hierarchy, state: _Lighting, polygons: np.ndarray) -> int:
         """Queue the maxima of the important unoccluded transfers onto the polygons being refined (6.3)."""

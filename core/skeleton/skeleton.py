@@ -236,9 +236,19 @@ class Skeleton:
         polygons = np.unique(np.concatenate(faces))
         return polygons[(topo.face_group[polygons] != a) & (topo.face_group[polygons] != b)]
 
+    def element_faces(self, code: int) -> np.ndarray:
+        """(K,) int64 the polygons around a generator element (vertex v as code v, edge e as n_vertices + e)."""
+        return _element_faces(self.scene, self.topology, int(code))
+
     def discontinuities(self, source: int, receiver: int) -> np.ndarray:
         """(M, 2, 3) float64 segments on the receiver's plane: the traces of the EV and EEE swaths between
         source and receiver (EEE traces, quadric curves, as polylines within tol.curve)."""
+        return self.discontinuity_events(source, receiver)[0]
+
+    def discontinuity_events(self, source: int, receiver: int) -> tuple[np.ndarray, np.ndarray]:
+        """The segments of `discontinuities` (M, 2, 3) float64 and the generators of the swath each traces,
+        (M, 3) int64 element codes (vertex v as v, edge e as n_vertices + e, -1 unused): what the ranking of
+        seed 000 section 6.4 needs to find the blocker of each visual event."""
         a = self._group(source, "source")
         b = self._group(receiver, "receiver")
         self._require(source)
@@ -246,6 +256,7 @@ class Skeleton:
         normal = scene.normals[receiver]
         offset = scene.plane_offsets[receiver]
         pieces = []
+        generators = []
         for arc in self._pair(a, b):
             if self.arcs.dangling[arc]:
                 continue
@@ -255,10 +266,12 @@ class Skeleton:
                 for code in codes
             ):
                 continue
-            pieces.append(self._trace(arc, normal, offset))
+            trace = self._trace(arc, normal, offset)
+            pieces.append(trace)
+            generators.append(np.repeat(codes[None, :3].astype(np.int64), len(trace), axis=0))
         if not pieces:
-            return np.empty((0, 2, 3))
-        return np.concatenate(pieces)
+            return np.empty((0, 2, 3)), np.empty((0, 3), dtype=np.int64)
+        return np.concatenate(pieces), np.concatenate(generators)
 
     def _arc_line(self, arc: int, s: float) -> tuple[np.ndarray, np.ndarray]:
         """A point (3,) and direction (3,) of the arc's line at parameter s."""

@@ -1,0 +1,263 @@
+"""Discontinuity meshing (seed 000 sections 5, 6.2 and 6.4): the visual events of the emitters' light on a
+receiver, from the Visibility Skeleton built lazily for the emitters, ranked by the visibility oracle.
+
+The skeleton gives, for an (emitter, receiver) pair, the traces of its EV and EEE swaths on the receiver with
+the generators of each swath (`Skeleton.discontinuity_events`). The generators that are not on the emitter
+belong to the blocker of the event. Section 6.4 estimates the variation of radiosity an event causes:
+
+* the unoccluded transfer B_unoc = rho_r B_s F, F the disk estimate of the emitter seen from the trace's end;
+* the shadow amount: the blocker (diameter D(b), at distance l1 from the receiver point, the emitter at l2)
+  projects onto the emitter with diameter D_proj = D(b) l2 / l1 and hides occlu = min(1, pi D_proj^2 / 4 A_s)
+  of it: shadow = B_unoc occlu;
+* the sharpness: the penumbra is D(pen) = D(s) l1 / l2 wide; on a receiver of diameter D(r) smaller than the
+  penumbra the radiosity varies by shadow D(r) / D(pen) only.
+
+Delta B = shadow min(1, D(r) / D(pen)), the larger of its values at the trace's two ends, luminance weighted.
+Events with a perceptible Delta B are inserted into the receiver as constrained segments, highest first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..formfactor import disk_ff_estimate
+from .perception import LUMINANCE_WEIGHTS
+
+
+@dataclass(frozen=True)
+class ReceiverEvents:
+    """The candidate discontinuities of one receiver polygon (M events).
+
+    segments (M, 2, 3) float64 traces on the receiver; emitter (M,) int64 the source of each event;
+    blocker_size (M,) float64 D(b); blocker_point (M, 2, 3) float64 the point of the blocker's generators
+    nearest the line joining each end of the trace to the emitter's centre; pieces (G, 2, 3) float64 the
+    segments to insert: the traces with collinear overlapping ones merged (several swaths can trace the same
+    line, and a triangulation cannot take overlapping constraints); group (M,) int64 the piece of each trace.
+    """
+
+    segments: np.ndarray
+    emitter: np.ndarray
+    blocker_size: np.ndarray
+    blocker_point: np.ndarray
+    pieces: np.ndarray
+    group: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.segments)
+
+
+def receiver_events(skeleton, scene, receiver: int, emitters) -> ReceiverEvents:
+    """The visual events of every emitter of `emitters` (int ids) on polygon `receiver`."""
+    segments, emitter, sizes, points = [], [], [], []
+    diameters = _polygon_diameters(scene)
+    for source in emitters:
+        if source == receiver:
+            continue
+        traces, generators = skeleton.discontinuity_events(int(source), receiver)
+        if not len(traces):
+            continue
+        own = _on_polygon(scene, skeleton, generators, int(source))
+        centre = scene.centroids[source]
+        for trace, codes, mine in zip(traces, generators, own, strict=True):
+            blocking = [int(c) for c, m in zip(codes, mine, strict=True) if c >= 0 and not m]
+            if not blocking:
+                continue
+            faces = np.unique(np.concatenate([skeleton.element_faces(c) for c in blocking]))
+            segments.append(trace)
+            emitter.append(int(source))
+            sizes.append(float(diameters[faces].max()))
+            points.append([_nearest_on_elements(scene, blocking, end, centre) for end in trace])
+    if not segments:
+        empty = np.empty((0, 2, 3))
+        return ReceiverEvents(empty, np.empty(0, np.int64), np.empty(0), empty, empty, np.empty(0, np.int64))
+    segments = np.array(segments)
+    pieces, group = merge_collinear(segments, scene.tol.snap)
+    return ReceiverEvents(segments, np.array(emitter), np.array(sizes), np.array(points), pieces, group)
+
+
+def merge_collinear(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Merge segments (M, 2, 3) lying on one line and overlapping or touching (within tol) into single pieces.
+
+    Returns (pieces (G, 2, 3) float64, group (M,) int64 the piece holding each segment)."""
+    count = len(segments)
+    parent = np.arange(count)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    starts = segments[:, 0]
+    directions = segments[:, 1] - starts
+    lengths = np.linalg.norm(directions, axis=1)
+    units = directions / np.where(lengths > 0.0, lengths, 1.0)[:, None]
+    for i in range(count):
+        others = np.arange(i + 1, count)
+        if not len(others):
+            break
+        ends = segments[others]
+        offsets = ends - starts[i]
+        along = offsets @ units[i]
+        across = np.linalg.norm(offsets - along[..., None] * units[i], axis=2)
+        on_line = (across <= tol).all(axis=1)
+        overlap = (along.max(axis=1) >= -tol) & (along.min(axis=1) <= lengths[i] + tol)
+        for j in others[on_line & overlap]:
+            parent[root(int(j))] = root(i)
+    roots = np.array([root(i) for i in range(count)])
+    _, group = np.unique(roots, return_inverse=True)
+    pieces = np.empty((group.max() + 1, 2, 3))
+    for g in range(len(pieces)):
+        members = np.flatnonzero(group == g)
+        first = members[np.argmax(lengths[members])]
+        points = segments[members].reshape(-1, 3)
+        along = (points - starts[first]) @ units[first]
+        pieces[g] = points[[np.argmin(along), np.argmax(along)]]
+    return pieces, group.astype(np.int64)
+
+
+def event_variation(events: ReceiverEvents, which, scene, receiver: int, radiated, receiver_size) -> np.ndarray:
+    """(K,) float64 the luminance-weighted Delta B (section 6.4) of events `which` (K,) int on receiver regions
+    of diameters `receiver_size` (K,); radiated (2 P, 3): what each polygon side radiates."""
+    which = np.asarray(which, dtype=np.int64)
+    if not len(which):
+        return np.empty(0)
+    rho = float(scene.reflectance[receiver] @ LUMINANCE_WEIGHTS)
+    source_luminance = (np.asarray(radiated) @ LUMINANCE_WEIGHTS).reshape(-1, 2).max(axis=1)
+    diameters = _polygon_diameters(scene)
+    emitter = events.emitter[which]
+    normals = np.tile(scene.normals[receiver], (len(which), 1))
+    centres = scene.centroids[emitter]
+    areas = scene.areas[emitter]
+    variation = np.zeros(len(which))
+    for end in range(2):
+        points = events.segments[which, end]
+        unoccluded = np.zeros(len(which))
+        for source in np.unique(emitter):
+            rows = emitter == source
+            unoccluded[rows] = disk_ff_estimate(points[rows], normals[rows], centres[rows][0], scene.normals[source],
+                                                scene.areas[source])  # fmt: skip
+        unoccluded *= rho * source_luminance[emitter]
+        to_blocker = np.linalg.norm(events.blocker_point[which, end] - points, axis=1)
+        to_source = np.linalg.norm(centres - points, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            projected = events.blocker_size[which] * to_source / to_blocker
+            penumbra = diameters[emitter] * to_blocker / to_source
+            occlusion = np.where(to_blocker > 0.0, np.minimum(1.0, 0.25 * np.pi * projected**2 / areas), 1.0)
+            sharpness = np.where(penumbra > 0.0, np.minimum(1.0, receiver_size / penumbra), 1.0)
+        variation = np.maximum(variation, unoccluded * occlusion * sharpness)
+    return variation
+
+
+def clip_to_convex(segment: np.ndarray, polygon: np.ndarray, normal: np.ndarray) -> np.ndarray | None:
+    """The part (2, 3) of a segment (2, 3) lying in the plane of the convex polygon (K, 3) that is inside it,
+    or None when nothing of it is."""
+    start, end = segment
+    lo, hi = 0.0, 1.0
+    centre = polygon.mean(axis=0)
+    for k in range(len(polygon)):
+        a = polygon[k]
+        inward = np.cross(normal, polygon[(k + 1) % len(polygon)] - a)
+        if inward @ (centre - a) < 0.0:
+            inward = -inward
+        at_start = (start - a) @ inward
+        at_end = (end - a) @ inward
+        if at_start < 0.0 and at_end < 0.0:
+            return None
+        if at_start < 0.0:
+            lo = max(lo, at_start / (at_start - at_end))
+        elif at_end < 0.0:
+            hi = min(hi, at_start / (at_start - at_end))
+    if hi <= lo:
+        return None
+    direction = end - start
+    return np.stack([start + lo * direction, start + hi * direction])
+
+
+def crossing(segments_2d: np.ndarray, triangles_2d: np.ndarray, tol: float) -> np.ndarray:
+    """(M, T) bool: which segments (M, 2, 2) meet which triangles (T, 3, 2), within tol (separating axes: the
+    triangle's three side normals and the segment's normal)."""
+    if not len(segments_2d) or not len(triangles_2d):
+        return np.zeros((len(segments_2d), len(triangles_2d)), dtype=bool)
+    seg = segments_2d[:, None, :, :]
+    tri = triangles_2d[None, :, :, :]
+    meets = np.ones((len(segments_2d), len(triangles_2d)), dtype=bool)
+    axes = [np.roll(triangles_2d, -1, axis=1) - triangles_2d]
+    side_axes = np.stack([-axes[0][..., 1], axes[0][..., 0]], axis=-1)[None]
+    for k in range(3):
+        axis = side_axes[:, :, k]
+        meets &= ~_separated(seg @ axis[..., None], tri @ axis[..., None], tol * np.linalg.norm(axis, axis=-1))
+    direction = segments_2d[:, 1] - segments_2d[:, 0]
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=-1)[:, None, :]
+    meets &= ~_separated(seg @ normal[..., None], tri @ normal[..., None], tol * np.linalg.norm(normal, axis=-1))
+    return meets
+
+
+def _separated(a, b, margin) -> np.ndarray:
+    """Whether the projections a (..., 2, 1) and b (..., 3, 1) on one axis leave a gap wider than margin."""
+    a = a[..., 0]
+    b = b[..., 0]
+    return (a.max(axis=-1) < b.min(axis=-1) - margin) | (b.max(axis=-1) < a.min(axis=-1) - margin)
+
+
+def _polygon_diameters(scene) -> np.ndarray:
+    corners = [scene.polygon(p) for p in range(scene.n_polygons)]
+    return np.array([np.linalg.norm(c[:, None] - c[None], axis=2).max() for c in corners])
+
+
+def _on_polygon(scene, skeleton, generators: np.ndarray, polygon: int) -> np.ndarray:
+    """(M, 3) bool: which generator codes are elements of the surface (face group) of `polygon`."""
+    group = skeleton.topology.face_group[polygon]
+    out = np.zeros(generators.shape, dtype=bool)
+    for index, code in np.ndenumerate(generators):
+        if code >= 0:
+            out[index] = bool((skeleton.topology.face_group[skeleton.element_faces(code)] == group).any())
+    return out
+
+
+def _nearest_on_elements(scene, codes, point, centre) -> np.ndarray:
+    """The point of the generator elements (vertices or edges, by code) nearest the segment point -> centre."""
+    best, best_distance = None, np.inf
+    for code in codes:
+        if code < scene.n_vertices:
+            candidate = scene.vertices[code]
+        else:
+            a, b = scene.vertices[scene.edges[code - scene.n_vertices]]
+            candidate = _segment_point_nearest_segment(a, b, point, centre)
+        distance = _distance_to_segment(candidate, point, centre)
+        if distance < best_distance:
+            best, best_distance = candidate, distance
+    return best
+
+
+def _segment_point_nearest_segment(a, b, p, q) -> np.ndarray:
+    """The point of segment ab nearest segment pq (closest points of two segments, clamped to both)."""
+    d1 = b - a
+    d2 = q - p
+    r = a - p
+    aa = d1 @ d1
+    ee = d2 @ d2
+    if aa == 0.0:
+        return a.copy()
+    c = d1 @ r
+    if ee == 0.0:
+        return a + np.clip(-c / aa, 0.0, 1.0) * d1
+    f = d2 @ r
+    bb = d1 @ d2
+    denominator = aa * ee - bb * bb
+    s = np.clip((bb * f - c * ee) / denominator, 0.0, 1.0) if denominator > 0.0 else 0.0
+    t = (bb * s + f) / ee
+    if t < 0.0:
+        s = np.clip(-c / aa, 0.0, 1.0)
+    elif t > 1.0:
+        s = np.clip((bb - c) / aa, 0.0, 1.0)
+    return a + s * d1
+
+
+def _distance_to_segment(x, p, q) -> float:
+    d = q - p
+    length2 = d @ d
+    t = 0.0 if length2 == 0.0 else float(np.clip((x - p) @ d / length2, 0.0, 1.0))
+    return float(np.linalg.norm(p + t * d - x))
