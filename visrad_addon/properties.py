@@ -15,8 +15,8 @@ from .convert import EXCLUDE_PROPERTY
 # Starting points, to be tuned with the solver's benchmarks: Accurate is the 1999 paper's mode (exact
 # form factors from the visibility skeleton), Fast its ray-cast alternative.
 PRESETS = {
-    "ACCURATE": {"jnd": 0.02, "max_iterations": 10, "form_factors": "EXACT", "rays": 16},
-    "FAST": {"jnd": 0.05, "max_iterations": 4, "form_factors": "RAYS", "rays": 16},
+    "ACCURATE": {"jnd": 0.02, "max_iterations": 10, "form_factors": "EXACT", "rays": 16, "discontinuities": True},
+    "FAST": {"jnd": 0.05, "max_iterations": 4, "form_factors": "RAYS", "rays": 16, "discontinuities": False},
 }
 
 
@@ -78,6 +78,12 @@ class VisRadSettings(bpy.types.PropertyGroup):
         min=1,
         soft_max=1024,
     )
+    discontinuities: BoolProperty(
+        name="Discontinuities",
+        description="Build the visibility skeleton of the lights and mesh along the shadow boundaries that "
+        "matter (from the third refinement on); off refines at the worst samples only",
+        default=True,
+    )
 
 
 def solver_settings(props: VisRadSettings) -> dict:
@@ -90,6 +96,7 @@ def solver_settings(props: VisRadSettings) -> dict:
         "max_iterations": int(props.max_iterations),
         "max_bounces": None if props.max_bounces == 0 else int(props.max_bounces),
         "form_factors": "exact" if props.form_factors == "EXACT" else int(props.rays),
+        "discontinuities": bool(props.discontinuities),
     }
 
 

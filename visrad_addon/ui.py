@@ -39,6 +39,7 @@ class VISRAD_PT_main(_VisRadPanel, bpy.types.Panel):
         row = column.row()
         row.enabled = props.form_factors == "RAYS"
         row.prop(props, "rays")
+        column.prop(props, "discontinuities")
         layout.prop(props, "max_bounces")
 
 

@@ -101,6 +101,7 @@ def test_batch_statistics(baked):
         "max_iterations": 1,
         "max_bounces": 2,
         "form_factors": "exact",
+        "discontinuities": True,
     }
     seconds = stats["seconds"]
     assert set(seconds["stages"]) == {"build_skeleton", "coarse_lighting", "refine"}

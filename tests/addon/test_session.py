@@ -13,7 +13,14 @@ from visrad.visrad_addon.write_back import ROLE_PROPERTY, ResultArrays, write_re
 
 from tests.addon.blender_scenes import area_light, box, diffuse_material, grid, user_data_fingerprint  # noqa: E402
 
-SETTINGS = {"jnd": 0.02, "max_iterations": 10, "max_bounces": None, "form_factors": "exact", "preset": "accurate"}
+SETTINGS = {
+    "jnd": 0.02,
+    "max_iterations": 10,
+    "max_bounces": None,
+    "form_factors": "exact",
+    "discontinuities": True,
+    "preset": "accurate",
+}
 
 
 @pytest.fixture
@@ -118,6 +125,7 @@ def test_settings_presets_and_solver_keywords(small_scene):
         "max_iterations": 4,
         "max_bounces": None,
         "form_factors": 16,
+        "discontinuities": False,
     }
     props.preset = "CUSTOM"
     props.form_factors, props.rays, props.max_bounces = "EXACT", 64, 1
@@ -125,6 +133,8 @@ def test_settings_presets_and_solver_keywords(small_scene):
     assert solver_settings(props)["max_bounces"] == 1
     props.form_factors = "RAYS"
     assert solver_settings(props)["form_factors"] == 64
+    props.discontinuities = True
+    assert solver_settings(props)["discontinuities"] is True
 
 
 def test_the_exclusion_toggle_is_the_custom_property_conversion_reads(small_scene):

@@ -61,7 +61,7 @@ def checked_scene(registered_addon):
 
 def test_settings_panel_shows_every_setting(checked_scene):
     shown = {name for kind, name in draw(ui.VISRAD_PT_main) if kind == "prop"}
-    assert shown == {"preset", "jnd", "max_iterations", "form_factors", "rays", "max_bounces"}
+    assert shown == {"preset", "jnd", "max_iterations", "form_factors", "rays", "discontinuities", "max_bounces"}
 
 
 def test_scene_panel_before_and_after_check_scene(checked_scene):
