@@ -109,6 +109,14 @@ def stats_lines(stats: dict, max_iterations: int | None = None) -> list[str]:
         limit = f" of {max_iterations}" if max_iterations else ""
         state = "converged" if stats["converged"] else "not converged"
         lines = [f"Refinement: {stats['iterations']}{limit} iterations, {state}"]
+    skeleton = stats.get("skeleton")
+    if skeleton:
+        lines.append(f"Skeleton: {sum(skeleton['nodes'].values()):,} nodes, {sum(skeleton['arcs'].values()):,} arcs")
+    if stats.get("discontinuities_available"):
+        lines.append(
+            f"Discontinuities: {stats['discontinuities_inserted']:,} inserted "
+            f"of {stats['discontinuities_available']:,} found"
+        )
     if stats.get("lit"):
         lines.append(f"Links: {stats['links']:,}")
         lines.append(f"Vertices: {stats['vertices']:,}, triangles: {stats['leaf_triangles']:,}")

@@ -106,6 +106,10 @@ def test_solve_panel_has_every_stage_and_shows_the_statistics(checked_scene):
     state = "converged" if stats["converged"] else "not converged"
     assert labels[0] == f"Refinement: {stats['iterations']} of 1 iterations, {state}"
     assert f"Links: {stats['links']:,}" in labels
+    skeleton = stats["skeleton"]
+    nodes, arcs = sum(skeleton["nodes"].values()), sum(skeleton["arcs"].values())
+    assert nodes > 0 and arcs > 0
+    assert f"Skeleton: {nodes:,} nodes, {arcs:,} arcs" in labels
     assert f"Vertices: {stats['vertices']:,}, triangles: {stats['leaf_triangles']:,}" in labels
     assert any(text.startswith("Time: visibility ") and "coarse" in text and "refine" in text for text in labels)
     assert any(text.startswith("Peak memory: ") and text.endswith(" MiB") for text in labels)
