@@ -8,8 +8,9 @@ Options: --preset accurate|fast, --max-bounces N (0 = full global illumination, 
 (times, counts, memory), --render FILE.png (a Cycles render of the result meshes alone, from the scene's
 camera), --render-samples N (default 16: the results are pure emission, samples only anti-alias),
 --render-percent P (resolution scale), --render-exposure EV|auto (auto puts the area-weighted mean luminance
-of the results at middle grey; default the scene's colour management), --scene NAME (default: the active
-scene).
+of the results at middle grey; default the scene's colour management), --render-discontinuities FILE.png (the
+same render with the inserted discontinuity curves drawn over it as thin red tubes), --scene NAME (default:
+the active scene).
 
 The script runs the same operator as the panel's Bake button (`visrad.bake`: visibility, coarse lighting,
 refinement until converged or --max-iterations, then the result meshes), so the saved file holds exactly what
@@ -73,6 +74,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         metavar="EV|auto",
         help="exposure of the render in stops, or auto (mean radiance of the results at middle grey); "
         "default: the scene's own colour management",
+    )
+    parser.add_argument(
+        "--render-discontinuities",
+        type=Path,
+        metavar="FILE.png",
+        help="the same render with the discontinuity curves drawn in red (needs a camera)",
     )
     parser.add_argument("--scene", metavar="NAME", help="the scene to bake (default: the file's active scene)")
     args = parser.parse_args(argv)
@@ -178,6 +185,13 @@ def bake(args: argparse.Namespace, started: float) -> dict:
             bpy, blender_scene, addon, render, args.render_samples, args.render_percent, args.render_exposure
         )
         seconds["render"] = time.perf_counter() - clock
+    if args.render_discontinuities is not None:
+        clock = time.perf_counter()
+        render_results(
+            bpy, blender_scene, addon, _absolute(args.render_discontinuities), args.render_samples,
+            args.render_percent, args.render_exposure, curves=True,
+        )  # fmt: skip
+        seconds["render_discontinuities"] = time.perf_counter() - clock
 
     seconds["stages"] = solver_stats.pop("seconds", {})
     seconds["write_results"] = written["seconds"]
@@ -189,6 +203,9 @@ def bake(args: argparse.Namespace, started: float) -> dict:
         "render": str(_absolute(args.render)) if args.render is not None else None,
         "render_bytes": _absolute(args.render).stat().st_size if args.render is not None else None,
         "render_exposure": exposure if args.render is not None else None,
+        "render_discontinuities": (
+            str(_absolute(args.render_discontinuities)) if args.render_discontinuities is not None else None
+        ),
         "scene": blender_scene.name,
         "blender": bpy.app.version_string,
         "addon": origin,
@@ -260,6 +277,8 @@ def _check_outputs(source: Path, output: Path, args) -> None:
         named.append(("--stats", _absolute(args.stats)))
     if args.render is not None:
         named.append(("--render", _absolute(args.render)))
+    if args.render_discontinuities is not None:
+        named.append(("--render-discontinuities", _absolute(args.render_discontinuities)))
     for option, path in named:
         if _same_file(path, source):
             raise BatchError(f"{option} {path} is the input file: batch.py never overwrites its input")
@@ -335,10 +354,13 @@ MIDDLE_GREY = 0.18
 LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights of linear RGB
 
 
-def render_results(bpy, blender_scene, addon, path: Path, samples: int, percent: int, exposure=None) -> float:
+def render_results(
+    bpy, blender_scene, addon, path: Path, samples: int, percent: int, exposure=None, curves: bool = False
+) -> float:
     """Render the scene's result meshes alone with Cycles into the PNG `path`; the original meshes are hidden
     from render meanwhile and every setting is restored afterwards. exposure: stops, "auto" or None (the
-    scene's own). Returns the exposure used."""
+    scene's own). curves: also draw the discontinuity curves, as thin emissive red tubes for this render only.
+    Returns the exposure used."""
     if blender_scene.camera is None:
         raise BatchError(f'--render needs a camera: scene "{blender_scene.name}" has none')
     role = addon.write_back.ROLE_PROPERTY
@@ -361,6 +383,7 @@ def render_results(bpy, blender_scene, addon, path: Path, samples: int, percent:
         exposure = auto_exposure(addon, blender_scene)
     elif exposure is None:
         exposure = blender_scene.view_settings.exposure
+    drawn = _draw_curves(bpy, blender_scene, addon, exposure) if curves else None
     try:
         for obj in hidden:
             obj.hide_render = True
@@ -383,9 +406,53 @@ def render_results(bpy, blender_scene, addon, path: Path, samples: int, percent:
             setattr(owner, name, value)
         for obj in hidden:
             obj.hide_render = False
+        if drawn is not None:
+            _undraw_curves(bpy, *drawn)
     if not path.is_file():
         raise BatchError(f"the render was not written to {path}")
     return float(exposure)
+
+
+# the drawn curves' tube radius, as a fraction of the diagonal of the result meshes' bounding box
+_CURVE_RADIUS = 0.0015
+
+
+def _draw_curves(bpy, blender_scene, addon, exposure: float) -> tuple:
+    """Give the scene's discontinuity curve objects a bevel and a red emission bright enough at `exposure`;
+    returns what _undraw_curves needs to take it back. Result objects have identity transforms, so their
+    bounding boxes are in world space."""
+    role = addon.write_back.ROLE_PROPERTY
+    objects = [obj for obj in blender_scene.objects if obj.get(role) is not None]
+    corners = [tuple(corner) for obj in objects for corner in obj.bound_box]
+    extent = [max(c[k] for c in corners) - min(c[k] for c in corners) for k in range(3)] if corners else [0.0] * 3
+    diagonal = sum(e * e for e in extent) ** 0.5
+    material = bpy.data.materials.new("VisRad discontinuity preview")
+    if bpy.app.version < (5, 0, 0):
+        material.use_nodes = True
+    nodes = material.node_tree.nodes
+    nodes.clear()
+    emission = nodes.new("ShaderNodeEmission")
+    emission.inputs["Color"].default_value = (1.0, 0.02, 0.02, 1.0)
+    emission.inputs["Strength"].default_value = 2.0 ** (-exposure)
+    output = nodes.new("ShaderNodeOutputMaterial")
+    material.node_tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    saved = []
+    for obj in objects:
+        if obj.type != "CURVE":
+            continue
+        saved.append((obj, obj.data.bevel_depth, obj.visible_camera))
+        obj.data.bevel_depth = _CURVE_RADIUS * diagonal
+        obj.data.materials.append(material)
+        obj.visible_camera = True
+    return material, saved
+
+
+def _undraw_curves(bpy, material, saved) -> None:
+    for obj, depth, visible in saved:
+        obj.data.materials.pop()
+        obj.data.bevel_depth = depth
+        obj.visible_camera = visible
+    bpy.data.materials.remove(material)
 
 
 def auto_exposure(addon, blender_scene) -> float:

@@ -166,3 +166,41 @@ def test_batch_rejects_bad_arguments(tmp_path, arguments):
     output = [] if not arguments else ["--output", tmp_path / "out.blend"]
     process = run_batch(CORNELL, *output, *arguments, cwd=tmp_path)
     assert process.returncode == 2 and "usage:" in process.stderr
+
+
+def _pixels(path: Path):
+    import numpy as np
+
+    image = bpy.data.images.load(str(path))
+    try:
+        return np.array(image.pixels[:], dtype=np.float64).reshape(image.size[1], image.size[0], 4)[:, :, :3]
+    finally:
+        bpy.data.images.remove(image)
+
+
+def test_render_with_discontinuities_draws_the_curves_and_takes_them_back(registered_addon, tmp_path):
+    import numpy as np
+    from visrad.visrad_addon import batch
+    from visrad.visrad_addon.session import store
+    from visrad.visrad_addon.write_back import ROLE_DISCONTINUITY_OBJECT
+
+    bpy.ops.wm.open_mainfile(filepath=str(CORNELL))
+    store.clear()
+    scene = bpy.context.scene
+    scene.visrad.max_iterations = 3
+    assert bpy.ops.visrad.bake() == {"FINISHED"}
+    curves = [obj for obj in scene.objects if obj.get(ROLE_PROPERTY) == ROLE_DISCONTINUITY_OBJECT]
+    assert curves, "three iterations insert discontinuities on the floor"
+    before = [(obj.data.bevel_depth, len(obj.data.materials), obj.visible_camera) for obj in curves]
+    materials = set(bpy.data.materials.keys())
+    plain, drawn = tmp_path / "plain.png", tmp_path / "drawn.png"
+    exposure = batch.render_results(bpy, scene, registered_addon, plain, 2, 25, "auto")
+    assert batch.render_results(bpy, scene, registered_addon, drawn, 2, 25, "auto", curves=True) == exposure
+    assert [(obj.data.bevel_depth, len(obj.data.materials), obj.visible_camera) for obj in curves] == before
+    assert set(bpy.data.materials.keys()) == materials
+    a, b = _pixels(plain), _pixels(drawn)
+    changed = np.abs(a - b).max(axis=2) > 0.1
+    assert 10 < changed.sum() < 0.05 * changed.size
+    # the tubes add red light over whatever they cover (blended at their anti-aliased edges)
+    added = (b - a)[changed]
+    assert np.all(added[:, 0] > np.maximum(added[:, 1], added[:, 2]))
