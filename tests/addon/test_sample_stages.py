@@ -1,17 +1,18 @@
 """Every stage operator on every sample scene (issue 6: "run every operator on the sample scenes").
 
-On each of the five samples: Bake from a fresh file writes result meshes with finite radiance; Clear Results
-removes everything the add-on made; then Build Skeleton, Coarse Lighting, Refine and Write Results one by one
-write the same solution again (the solver is seeded, so the stages and Bake must agree), and Clear Results
-removes it. The user's data is compared before and after.
+On each of the five samples: Build Skeleton, Coarse Lighting and Refine one by one, Write Results (result
+meshes with finite radiance on every receiver), Clear Results (nothing of the add-on's left), then Bake, which
+continues the same solution with one more refinement and writes, and Clear Results again. The user's data is
+compared before and after.
 
 Speed. The settings are the cheapest that still run every stage for real: ray-cast form factors with 4 rays,
-JND 0.5, direct light only, one refinement iteration. Measured on the 2-core machine (seconds for Build
-Skeleton, Coarse Lighting, Refine) the Fast preset takes desk 0.2 / 2.1 / 9.5, many_lights 0.6 / 2.8 / 12.9,
-indirect_bedroom 0.4 / 5.0 / 13.4, village 0.2 / 1.6 / 6.2, and the Accurate preset (exact form factors) is
-slower still (desk coarse lighting alone 12 s at JND 0.5): too slow to run twice on five samples in a test.
-With these settings the test of one sample (both passes) takes 1 s (Cornell box) to 7 s (indirect_bedroom),
-22 s for the five.
+JND 0.5, direct light only, one refinement iteration (two for Bake). Build Skeleton dominates: it builds the
+Visibility Skeleton of the emitters (core's Settings.discontinuities, on by default, which the add-on's
+settings do not expose), measured on the 2-core machine at 0.8 s (Cornell box), 8.5 s (desk), 12 s
+(many_lights), 8.3 s (indirect_bedroom) and 6.5 s (village); Coarse Lighting and Refine then take 0.3-1.1 s
+each. So the skeleton is built once per sample; the test takes about 45 s for the five. The Fast preset's
+refinement alone took 6-13 s per sample and the Accurate preset's coarse lighting 12-15 s (desk,
+indirect_bedroom at JND 0.5): too slow here.
 """
 
 from pathlib import Path
@@ -87,28 +88,29 @@ def test_every_operator_on_the_sample(registered_addon, name):
     user_data = user_data_fingerprint(ROLE_PROPERTY)
     assert not bpy.ops.visrad.clear_results.poll(), "a sample comes without results"
 
-    assert bpy.ops.visrad.bake() == {"FINISHED"}
-    baked_solver = store.get(blender_scene).state[stages.SOLVER]
-    assert baked_solver.iterations == 1 or baked_solver.converged
-    baked = assert_written(blender_scene)
-    assert bpy.ops.visrad.clear_results() == {"FINISHED"}
-    assert result_objects(blender_scene) == [] and owned_datablocks() == []
-
     assert bpy.ops.visrad.build_skeleton() == {"FINISHED"}
-    solver = store.get(blender_scene).state[stages.SOLVER]
-    assert solver is not baked_solver and solver.facing is not None and solver.lighting is None
+    skeleton = store.get(blender_scene).state[stages.SOLVER]
+    assert skeleton.facing is not None and skeleton.lighting is None
     assert bpy.ops.visrad.coarse_lighting() == {"FINISHED"}
-    assert store.get(blender_scene).state[stages.SOLVER].lighting is not None
+    coarse = store.get(blender_scene).state[stages.SOLVER]
+    assert coarse.lighting is not None and coarse.iterations == 0 and coarse.facing is skeleton.facing
     assert bpy.ops.visrad.refine() == {"FINISHED"}
-    solver = store.get(blender_scene).state[stages.SOLVER]
-    assert solver.iterations == baked_solver.iterations
+    refined = store.get(blender_scene).state[stages.SOLVER]
+    assert refined.iterations == 1 or refined.converged
     assert result_objects(blender_scene) == [], "only Bake and Write Results write"
 
     assert bpy.ops.visrad.write_results() == {"FINISHED"}
-    staged = assert_written(blender_scene)
-    assert staged.keys() == baked.keys()
-    for key, values in staged.items():
-        np.testing.assert_allclose(values, baked[key], rtol=1e-5, atol=1e-7, err_msg=key)
+    assert_written(blender_scene)
+    assert bpy.ops.visrad.clear_results() == {"FINISHED"}
+    assert result_objects(blender_scene) == [] and owned_datablocks() == []
+
+    # Bake continues the session's solution (one more refinement) rather than building the skeleton again
+    blender_scene.visrad.max_iterations = 2
+    assert bpy.ops.visrad.bake() == {"FINISHED"}
+    baked = store.get(blender_scene).state[stages.SOLVER]
+    assert baked.facing is skeleton.facing and baked.refinement_log[:1] == refined.refinement_log[:1]
+    assert baked.iterations == 2 or baked.converged
+    assert_written(blender_scene)
     assert bpy.ops.visrad.clear_results() == {"FINISHED"}
     assert result_objects(blender_scene) == [] and owned_datablocks() == []
     assert not bpy.ops.visrad.clear_results.poll()
