@@ -22,7 +22,8 @@ SAMPLE_WEIGHTS = np.array(
 
 
 def barycentric_coordinates(a, b, c, points) -> np.ndarray:
-    """(Q, T, 3) barycentric coordinates of points (Q, 3) in triangles a, b, c (T, 3) each, in each plane."""
+    """(Q, T, 3) barycentric coordinates of points (Q, 3) in triangles a, b, c (T, 3) each, in each plane; a
+    triangle without area holds no point (-inf)."""
     e1 = b - a
     e2 = c - a
     d = points[:, None, :] - a[None]
@@ -32,9 +33,13 @@ def barycentric_coordinates(a, b, c, points) -> np.ndarray:
     p1 = np.einsum("qtj,tj->qt", d, e1)
     p2 = np.einsum("qtj,tj->qt", d, e2)
     den = d11 * d22 - d12 * d12
+    degenerate = den == 0.0
+    den = np.where(degenerate, 1.0, den)
     v = (d22 * p1 - d12 * p2) / den
     w = (d11 * p2 - d12 * p1) / den
-    return np.stack([1.0 - v - w, v, w], axis=2)
+    coordinates = np.stack([1.0 - v - w, v, w], axis=2)
+    coordinates[:, degenerate] = -np.inf
+    return coordinates
 
 
 def locate(vertices, triangles, triangle_polygon, points, polygons) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

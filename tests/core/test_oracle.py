@@ -7,6 +7,7 @@ import numpy as np
 from bench.scenes import closed_furnished_room
 from core.formfactor import point_polygon_ff
 from core.pipeline import Settings, Solver
+from core.pipeline.interpolation import locate
 from core.pipeline.links import LinkSet
 from core.pipeline.oracle import distance_bounds, form_factor_bounds, select_exact
 from core.pipeline.perception import LUMINANCE_WEIGHTS
@@ -112,3 +113,15 @@ def test_lazy_links_stay_within_the_jnd_of_exact_links_on_the_same_mesh():
     assert lazy.iterations >= 3
     assert inherited > 0
     assert relative.max() <= 1.0
+
+
+def test_locate_agrees_with_a_naive_search_and_skips_flat_triangles():
+    rng = np.random.default_rng(9)
+    square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.5, 0.0, 0.0]])
+    triangles = np.array([[0, 1, 2], [0, 2, 3], [0, 4, 1]])  # the last one is flat
+    points = np.column_stack([rng.uniform(0, 1, 200), rng.uniform(0, 1, 200), np.zeros(200)])
+    with np.errstate(all="raise"):
+        best, _, weights = locate(square, triangles, np.zeros(3, np.int64), points, np.zeros(200, np.int64))
+    below = points[:, 1] <= points[:, 0]
+    np.testing.assert_array_equal(best, np.where(below, 0, 1))
+    np.testing.assert_allclose(np.einsum("qk,qkc->qc", weights, square[triangles[best]]), points, atol=1e-12)
