@@ -10,8 +10,6 @@ What is read (DESIGN.md section 2 gives the units):
   as they are (planar n-gons stay polygons; core splits non-planar or non-convex ones). An object is one-sided
   when its evaluated mesh is closed (every edge shared by exactly two polygons), two-sided otherwise, like
   `Scene.from_polygons`' own rule: a closed mesh's back sides face its inside.
-  Faces back to back on the same vertices are reported in the warnings: core takes them for surfaces in
-  contact and culls both.
 * Materials, from the node tree's active output: Diffuse BSDF "Color" and Principled BSDF "Base Color" give
   the reflectance; an Emission shader (Color C, Strength S) or the Principled "Emission Color" x "Emission
   Strength" give exitance E = pi * C * S, emitted from both sides of an open surface as Cycles does. Add and
@@ -235,13 +233,6 @@ def _mesh_part(evaluated, name: str, matrix: np.ndarray, materials: _MaterialRea
     if np.linalg.det(matrix[:3, :3]) < 0.0:
         # a mirroring transform turns counter-clockwise loops clockwise; Cycles keeps the mirrored normals
         loops = [loop[::-1] for loop in loops]
-    pairs = _back_to_back(loops)
-    if pairs:
-        warnings.append(
-            f'object "{name}" has {len(pairs)} pair(s) of faces back to back on the same vertices (polygons '
-            f"{pairs[0][0]} and {pairs[0][1]} first): the solver takes such faces for surfaces in contact, "
-            "hidden from each other, so they get no result (they still cast shadows); keep one face of each pair"
-        )
 
     reflectance = np.empty((n_polygons, 3))
     emission = np.empty((n_polygons, 3))
@@ -274,24 +265,6 @@ def _is_closed(loops: list[np.ndarray]) -> bool:
         return False
     reverse = {tuple(edge) for edge in directed.tolist()}
     return all((b, a) in reverse for a, b in directed.tolist())
-
-
-def _back_to_back(loops: list[np.ndarray]) -> list[tuple[int, int]]:
-    """Pairs of polygons with the same vertices in opposite order (a card modelled as two faces)."""
-
-    def canonical(cycle: list[int]) -> tuple[int, ...]:
-        start = cycle.index(min(cycle))
-        return tuple(cycle[start:] + cycle[:start])
-
-    first_seen: dict[tuple[int, ...], int] = {}
-    pairs = []
-    for index, loop in enumerate(loops):
-        cycle = loop.tolist()
-        twin = first_seen.get(canonical(cycle[::-1]))
-        if twin is not None:
-            pairs.append((twin, index))
-        first_seen.setdefault(canonical(cycle), index)
-    return pairs
 
 
 def _light_part(evaluated, name: str, matrix: np.ndarray, warnings: list[str], unsupported: list[str]):

@@ -22,8 +22,12 @@ def contact_regions(scene) -> dict:
         & (scene.polygon_max[:, None, :] >= scene.polygon_min[None, :, :] - eps),
         axis=2,
     )
+    # a closed object enclosing nothing (a card modelled as two faces back to back) is one surface seen from its
+    # two sides, not two surfaces in contact: each face shows its own side
+    flat = ~scene.solid & ~scene.two_sided
+    same_surface = flat[:, None] & (scene.object_ids[:, None] == scene.object_ids[None, :])
     regions: dict[int, list] = {}
-    for r, q in zip(*np.nonzero(opposite & same_plane & overlap), strict=True):
+    for r, q in zip(*np.nonzero(opposite & same_plane & overlap & ~same_surface), strict=True):
         piece = _clip_convex(scene.polygon(q)[::-1], scene.polygon(r), scene.normals[r], eps)
         if len(piece) >= 3 and _area(piece, scene.normals[r]) > scene.tol.area:
             regions.setdefault(int(r), []).append(piece)
