@@ -14,11 +14,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import VisradError
 from ..raycast import jittered_form_factors
 from ..visibility import exact_form_factors
 
 FRONT = 0
 BACK = 1
+# corner-to-plane heights computed at once by facing_sources (128 MiB of float64)
+_HEIGHTS_PER_CHUNK = 1 << 24
+# the share of the available memory one array of a stage may take
+_MEMORY_SHARE = 0.8
 
 
 @dataclass(frozen=True)
@@ -51,29 +56,57 @@ class LinkSet:
 def facing_sources(scene) -> np.ndarray:
     """(P, 2, P) bool: [p, s, q] when some of polygon q lies strictly in front of side s of polygon p and some
     of p strictly on a radiating side of q (its front, or its back when q is two-sided): the polygon pairs
-    that can exchange light at all."""
+    that can exchange light at all. Raises VisradError, before allocating, when the P^2 pairs cannot fit in
+    the memory available."""
+    count = scene.n_polygons
+    check_memory(4 * count * count, f"the pairs of the scene's {count:,} polygons")
     eps = scene.tol.length
     offsets = scene.polygon_offsets
     corners = scene.polygon_points
-    owner = np.repeat(np.arange(scene.n_polygons), np.diff(offsets))
-    # heights[q-corner, p] = signed distance of each corner of q to the plane of p
-    heights = corners @ scene.normals.T + scene.plane_offsets[None, :]
-    above = np.zeros((scene.n_polygons, scene.n_polygons), dtype=bool)
+    owner = np.repeat(np.arange(count), np.diff(offsets))
+    above = np.zeros((count, count), dtype=bool)  # above[q, p]: q reaches in front of p
     below = np.zeros_like(above)
-    np.logical_or.at(above, owner, heights > eps)
-    np.logical_or.at(below, owner, heights < -eps)
-    # above[q, p]: q reaches in front of p. p reaches in front of q: above[p, q] = above.T[q, p]
-    in_front_of_p = above.T
-    behind_p = below.T
-    p_in_front_of_q = above
-    p_behind_q = below & scene.two_sided[None, :]
-    radiates = p_in_front_of_q | p_behind_q
-    result = np.zeros((scene.n_polygons, 2, scene.n_polygons), dtype=bool)
-    result[:, FRONT, :] = in_front_of_p & radiates
-    result[:, BACK, :] = behind_p & radiates & scene.two_sided[:, None]
+    step = max(1, _HEIGHTS_PER_CHUNK // max(count, 1))
+    for start in range(0, len(corners), step):
+        stop = min(start + step, len(corners))
+        # signed distances of these corners to the plane of every polygon
+        heights = corners[start:stop] @ scene.normals.T + scene.plane_offsets[None, :]
+        np.logical_or.at(above, owner[start:stop], heights > eps)
+        np.logical_or.at(below, owner[start:stop], heights < -eps)
+    # p reaches in front of q: above[p, q] = above.T[q, p]
+    radiates = above | (below & scene.two_sided[None, :])
+    result = np.zeros((count, 2, count), dtype=bool)
+    result[:, FRONT, :] = above.T & radiates
+    result[:, BACK, :] = below.T & radiates & scene.two_sided[:, None]
     np.fill_diagonal(result[:, FRONT, :], False)
     np.fill_diagonal(result[:, BACK, :], False)
     return result
+
+
+def check_memory(needed: int, what: str) -> None:
+    """Raise VisradError when `needed` bytes for `what` exceed what the machine has available (Linux's
+    MemAvailable; elsewhere the check is skipped)."""
+    available = _available_memory()
+    if available is not None and needed > _MEMORY_SHARE * available:
+        raise VisradError(
+            f"{what} need about {_size(needed)} and {_size(available)} of memory are available: exclude objects "
+            "from VisRad or lower their subdivision"
+        )
+
+
+def _size(count: int) -> str:
+    return f"{count / 2**30:.1f} GiB" if count >= 2**30 else f"{count / 2**20:.0f} MiB"
+
+
+def _available_memory() -> int | None:
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
 
 
 def compute_links(scene, bvh, points, polygons, sides, facing, settings, interior=None, wanted=None) -> LinkSet:

@@ -133,6 +133,7 @@ class Solver:
         return self.result()
 
     def build_skeleton_steps(self):
+        facing = facing_sources(self.scene)
         self.bvh = scene_bvh(self.scene)
         yield 0.05
         emitters = np.flatnonzero(self._emitters)
@@ -141,7 +142,6 @@ class Solver:
             skeleton = Skeleton(self.scene)
             for fraction in skeleton.build_steps(emitters, self.cancel):
                 yield 0.05 + 0.9 * fraction
-        facing = facing_sources(self.scene)
         contacts = contact_regions(self.scene)
         uncovered = (1.0 - covered_fraction(self.scene, contacts)) * self.scene.areas
         longest = np.array([_longest_side(self.scene.polygon(p)) for p in range(self.scene.n_polygons)])

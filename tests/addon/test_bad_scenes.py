@@ -278,3 +278,22 @@ def test_check_scene_converts_a_huge_face_count_and_changes_nothing(lit_floor):
     assert growth < 2e9, f"Check Scene's peak memory grew by {growth / 1e9:.1f} GB"
     assert user_data_fingerprint(ROLE_PROPERTY) == before
     assert len(plane.data.polygons) == 100, "the modifier's faces are converted, the user's mesh is left alone"
+
+
+def test_build_skeleton_refuses_a_scene_too_large_for_the_memory_and_changes_nothing(lit_floor, monkeypatch):
+    """The visibility stage holds the pairs of the scene's polygons (P^2): when they cannot fit in the memory
+    the machine has (here made small), it says so before allocating, and nothing changes."""
+    from visrad.core.pipeline import links
+
+    bpy.data.objects.remove(bpy.data.objects["Floor"])
+    plane = grid("Terrain", (-1.0, -1.0, 0.0), (2, 0, 0), (0, 2, 0), 10, diffuse_material("ground", (0.6,) * 3))
+    plane.modifiers.new("Subdivision", "SUBSURF").levels = 2
+    bpy.context.view_layer.update()
+    monkeypatch.setattr(links, "_available_memory", lambda: 4 * 2**20)
+    before = user_data_fingerprint(ROLE_PROPERTY)
+    message = r"pairs of the scene's 1,601 polygons need about 10 MiB and 4 MiB of memory are available"
+    with pytest.raises(RuntimeError, match=message):
+        bpy.ops.visrad.build_skeleton()
+    assert store.get(lit_floor) is None or "solver" not in store.get(lit_floor).state
+    assert result_objects(lit_floor) == []
+    assert user_data_fingerprint(ROLE_PROPERTY) == before
