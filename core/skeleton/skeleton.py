@@ -293,17 +293,34 @@ class Skeleton:
         return point, np.cross(normals[0], normals[1])
 
     def _trace(self, arc: int, normal: np.ndarray, offset: float) -> np.ndarray:
-        """(k, 2, 3) segments: where the arc's lines meet the plane normal . x + offset = 0."""
+        """(k, 2, 3) float64 segments, k >= 0: where the arc's lines meet the plane normal . x + offset = 0.
+
+        Only the lines meeting the plane inside the scene's bounding box grown by its diagonal are traced: a
+        line parallel to the plane (an arc ending at a node whose line slides in the receiver's plane) meets
+        it nowhere or at infinity, and every point a receiver can use lies in the box. The arc's range is cut
+        down to those lines by bisection from each end; an arc with none of them traces nothing."""
         s0, s1 = self.arcs.s[arc]
+        scene = self.scene
+        lo = scene.bbox_min - scene.diagonal
+        hi = scene.bbox_max + scene.diagonal
 
         def hit(s):
             point, direction = self._arc_line(arc, s)
-            return point - (normal @ point + offset) / (normal @ direction) * direction
+            rate = normal @ direction
+            if abs(rate) <= scene.tol.cosine * np.linalg.norm(direction):
+                return None
+            x = point - (normal @ point + offset) / rate * direction
+            return x if ((x >= lo) & (x <= hi)).all() else None
 
+        middle = 0.5 * (s0 + s1)
+        if hit(middle) is None:
+            return np.empty((0, 2, 3))
+        s0 = _last_hit(hit, middle, s0)
+        s1 = _last_hit(hit, middle, s1)
         if self.arcs.kind[arc] == ARC_EV:
             return np.stack([hit(s0), hit(s1)])[None]
         samples = [(s0, hit(s0)), (s1, hit(s1))]
-        limit = self.scene.tol.curve
+        limit = scene.tol.curve
         i = 0
         while i < len(samples) - 1 and len(samples) < 4096:
             (sa, pa), (sb, pb) = samples[i], samples[i + 1]
@@ -572,6 +589,22 @@ def _lines_meet_polygons(points, offsets, normals, plane_offsets, polygons, orig
                 result[c] = True
                 break
     return result
+
+
+def _last_hit(hit, inside: float, outside: float) -> float:
+    """The parameter nearest `outside` on the way from `inside` (hit(inside) is a point) whose hit is still a
+    point: `outside` itself when it hits, else found by bisection (64 halvings reach float64 resolution)."""
+    if hit(outside) is not None:
+        return outside
+    for _ in range(64):
+        middle = 0.5 * (inside + outside)
+        if middle in (inside, outside):
+            break
+        if hit(middle) is None:
+            outside = middle
+        else:
+            inside = middle
+    return inside
 
 
 def _onto_plane(apex: np.ndarray, through: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:

@@ -227,3 +227,42 @@ def test_scale_keeps_nodes_and_arcs(name, factor):
     scaled = build_skeleton(_scaled(_scene(name), factor)).stats
     for key in ("nodes", "arcs", "dangling_arcs"):
         assert scaled[key] == reference[key], f"{key} at scale {factor}"
+
+
+# ----------------------------------------------------------------------------------------------------------
+# traces on planes the arcs' lines run parallel to
+
+
+def test_trace_stays_finite_where_arc_lines_run_parallel_to_the_plane():
+    """`discontinuity_events` feeds a mesher: an EV swath traced on a plane parallel to its line at one end
+    (that line meets the plane at infinity) gives finite segments on the plane, inside the scene's box grown
+    by its diagonal, on the swath; a plane parallel to the whole swath gives no segment."""
+    scene = _scene("box over floor")
+    skeleton = _skeleton("box over floor")
+    arcs = skeleton.arcs
+    lo, hi = scene.bbox_min - scene.diagonal, scene.bbox_max + scene.diagonal
+    tol = 1e3 * scene.tol.length
+    checked = 0
+    for arc in np.flatnonzero((arcs.kind == ARC_EV) & ~arcs.dangling)[:40]:
+        s0, s1 = arcs.s[arc]
+        if s1 - s0 < 1e-3:
+            continue
+        apex, d0 = skeleton._arc_line(int(arc), s0)
+        _, d1 = skeleton._arc_line(int(arc), s1)
+        swath = np.cross(d0, d1)
+        normal = np.cross(d0, swath)
+        normal /= np.linalg.norm(normal)
+        through = apex + skeleton._arc_line(int(arc), 0.5 * (s0 + s1))[1]
+        with np.errstate(all="raise"):
+            trace = skeleton._trace(int(arc), normal, -normal @ through)
+            beside = swath / np.linalg.norm(swath)
+            parallel = skeleton._trace(int(arc), beside, scene.diagonal - beside @ apex)
+        assert parallel.shape == (0, 2, 3)
+        assert trace.shape == (1, 2, 3) and np.isfinite(trace).all()
+        points = trace.reshape(-1, 3)
+        assert (points >= lo).all() and (points <= hi).all()
+        assert np.abs(points @ normal - normal @ through).max() <= tol
+        assert np.abs((points - apex) @ beside).max() <= tol
+        assert np.linalg.norm(points[0] - points[1]) > scene.diagonal
+        checked += 1
+    assert checked >= 10
