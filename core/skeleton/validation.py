@@ -403,6 +403,8 @@ def _relaxed_arc(
     before_poly = -1
     after_tau = np.inf
     after_poly = -1
+    touch_first = False
+    touch_last = False
     for k in range(n_sliding):
         n = normals[sl_poly[k]]
         rate = x[2] * _dot(n, f1) + x[3] * _dot(n, f2)
@@ -421,6 +423,14 @@ def _relaxed_arc(
                 handled = True
         if handled:
             continue
+        # a face of another object crossed at an outer generator (a box corner resting on the floor): the
+        # lines stop there, as they do at the arc's nodes where they do not lie in that face's plane
+        if abs(crossing - g_tau[first]) <= tol:
+            touch_first = True
+            continue
+        if abs(crossing - g_tau[last]) <= tol:
+            touch_last = True
+            continue
         if g_tau[first] + tol < crossing < g_tau[last] - tol:
             return False, 0, 0, 0, 0.0, 0
         if crossing <= g_tau[first] + tol and crossing > before_tau:
@@ -432,6 +442,7 @@ def _relaxed_arc(
 
     blocked_first = False
     blocked_last = False
+    behind = np.full(2, -1, dtype=np.int64)
     for g in range(first, last + 1):
         tn = g_tau[g] / diag
         delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
@@ -470,6 +481,8 @@ def _relaxed_arc(
                 return False, 0, 0, 0, 0.0, 0
             slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
             generator_shift = slide * _dot(d, u)
+            nearest = np.inf
+            side = 1 if g == last else 0
             for i in range(g_lo[g], g_hi[g]):
                 if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
                     continue
@@ -481,9 +494,16 @@ def _relaxed_arc(
                 if g != first and g != last:
                     return False, 0, 0, 0, 0.0, 0
                 ahead = shift - generator_shift if g == first else generator_shift - shift
-                if ahead > 1e-12:
+                if ahead > _SIDE_EPS:
                     return False, 0, 0, 0, 0.0, 0
-                blocked = True
+                if ahead >= -_SIDE_EPS:
+                    # the face passes through the edge (objects in contact): the lines stop there
+                    blocked = True
+                elif -ahead < nearest or (-ahead == nearest and areas[c_poly[i]] < areas[behind[side]]):
+                    # the lines cross this face just beyond the edge: it ends them, as it does at the arc's
+                    # other node, where the face is met further on (one key for both ends of the arc)
+                    nearest = -ahead
+                    behind[side] = c_poly[i]
         else:
             for i in range(g_lo[g], g_hi[g]):
                 hit, _ = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)
@@ -498,8 +518,10 @@ def _relaxed_arc(
             return False, 0, 0, 0, 0.0, 0
 
     end_before = END_FREE
-    if blocked_first:
+    if blocked_first or touch_first:
         end_before = END_TERMINAL
+    elif behind[0] >= 0:
+        end_before = face_group[behind[0]]
     else:
         for g in range(first - 1, -1, -1):
             if g_tau[g] < before_tau:
@@ -515,8 +537,10 @@ def _relaxed_arc(
         if end_before == END_FREE and before_poly >= 0:
             end_before = face_group[before_poly]
     end_after = END_FREE
-    if blocked_last:
+    if blocked_last or touch_last:
         end_after = END_TERMINAL
+    elif behind[1] >= 0:
+        end_after = face_group[behind[1]]
     else:
         for g in range(last + 1, n_groups):
             if g_tau[g] > after_tau:
