@@ -15,6 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,8 +42,40 @@ class Arcs:
         return (self.node < 0).any(axis=1)
 
 
+def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol: float) -> np.ndarray:
+    """(N,) int64: for each node line (start (N, 3), unit direction (N, 3)), the lowest id of the nodes on the
+    same line (within tol, lengths; scale: the scene's diagonal).
+
+    In degenerate scenes one extremal line goes through more generators than its kind needs (a vertex, a
+    parallel edge and a floor edge aligned): every subset of them validates as a node of its own. The simplest
+    configuration (seed 000 section 2.2) is one node for one line, so that the arcs met there meet each other.
+    """
+    n = len(start)
+    if n == 0:
+        return np.empty(0, dtype=np.int64)
+    flip = np.take_along_axis(direction, np.argmax(np.abs(direction), axis=1)[:, None], axis=1) < 0.0
+    unit = np.where(flip, -direction, direction)
+    foot = start - np.einsum("ij,ij->i", start, unit)[:, None] * unit
+    # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene
+    keys = np.hstack([foot / scale, unit])
+    pairs = cKDTree(keys).query_pairs(tol / scale, output_type="ndarray")
+    if len(pairs) == 0:
+        return np.arange(n, dtype=np.int64)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    lowest = np.full(labels.max() + 1, n, dtype=np.int64)
+    np.minimum.at(lowest, labels, np.arange(n, dtype=np.int64))
+    return lowest[labels]
+
+
 def assemble_arcs(kind, codes, end, s, direction, node) -> Arcs:
-    """Pair the incidences (M,) (see core.skeleton.validation.IncidenceChunk; node: global node ids) into arcs."""
+    """Pair the incidences (M,) (see core.skeleton.validation.IncidenceChunk; node: global node ids, coincident
+    nodes already merged) into arcs. An incidence repeated by merged nodes counts once."""
+    if len(kind):
+        rows = np.column_stack([kind, codes, end, node, direction]).astype(np.int64)
+        _, first = np.unique(rows, axis=0, return_index=True)
+        first = np.sort(first)
+        kind, codes, end, s, direction, node = (a[first] for a in (kind, codes, end, s, direction, node))
     if len(kind) == 0:
         return Arcs(
             np.empty(0, np.int8), np.empty((0, 3), np.int64), np.empty((0, 2), np.int64),

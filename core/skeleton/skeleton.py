@@ -26,7 +26,7 @@ from ..raycast import CONTACT_VERTEX, _contact_arc, _perpendicular_frame
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
-from .graph import assemble_arcs
+from .graph import assemble_arcs, coincident_nodes
 from .topology import scene_topology
 from .validation import (
     ARC_EV,
@@ -45,7 +45,9 @@ Cancel = Callable[[], bool]
 class Skeleton:
     """The skeleton of one scene, built for a set of source polygons (all of them after `complete`).
 
-    nodes: NodeChunk of every node (see core.skeleton.validation); arcs: core.skeleton.graph.Arcs;
+    nodes: NodeChunk of every node (see core.skeleton.validation); node_line (N,) int64: the node standing for
+    each one's line (nodes on one line merged, core.skeleton.graph.coincident_nodes); arcs: core.skeleton.graph.Arcs
+    (their nodes are such representatives);
     sources: sorted (S,) int64 polygons the skeleton is complete for, or None when complete for every line.
     Queries about a source not built yet build it first (lazily), so every answer is exact.
     """
@@ -135,9 +137,12 @@ class Skeleton:
         incidences = _concatenate_incidences(self._incidence_parts)
         self._node_parts = [self.nodes]
         self._incidence_parts = [incidences]
+        scene = self.scene
+        self.node_line = coincident_nodes(self.nodes.start, self.nodes.direction, scene.diagonal, scene.tol.length)
         self.arcs = assemble_arcs(
-            incidences.kind, incidences.codes, incidences.end, incidences.s, incidences.direction, incidences.node
-        )
+            incidences.kind, incidences.codes, incidences.end, incidences.s, incidences.direction,
+            self.node_line[incidences.node],
+        )  # fmt: skip
         self._index()
 
     def _index(self) -> None:
@@ -169,7 +174,10 @@ class Skeleton:
     @property
     def stats(self) -> dict:
         """nodes and arcs per type, dangling arcs, rejected candidates per reason, seconds, bytes."""
-        nodes = {name: int(np.count_nonzero(self.nodes.kind == kind)) for kind, name in NODE_NAMES.items()}
+        distinct = self.node_line == np.arange(len(self.nodes))
+        nodes = {
+            name: int(np.count_nonzero(distinct & (self.nodes.kind == kind))) for kind, name in NODE_NAMES.items()
+        }
         arcs = {name: int(np.count_nonzero(self.arcs.kind == kind)) for kind, name in ARC_NAMES.items()}
         return {
             "nodes": nodes,

@@ -266,3 +266,25 @@ def test_trace_stays_finite_where_arc_lines_run_parallel_to_the_plane():
         assert np.linalg.norm(points[0] - points[1]) > scene.diagonal
         checked += 1
     assert checked >= 10
+
+
+def test_coincident_nodes_merge_one_line_only():
+    """Node lines given by different points and either direction are merged to the lowest id; lines a little
+    apart (beyond the tolerance, in position or in direction) are not."""
+    from core.skeleton.graph import coincident_nodes
+
+    rng = np.random.default_rng(5)
+    scale, tol = 10.0, 1e-8
+    direction = rng.normal(size=(6, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    start = rng.uniform(-5.0, 5.0, size=(6, 3))
+    # nodes 6..11 repeat lines 0..5 from other points, half of them reversed
+    signs = np.where(np.arange(6) % 2 == 0, 1.0, -1.0)[:, None]
+    moved = start + rng.uniform(-3.0, 3.0, size=(6, 1)) * direction
+    # nodes 12, 13: line 0 shifted sideways by 10 tol, line 1 turned by 10 tol / scale
+    side = np.cross(direction[0], [0.0, 0.0, 1.0])
+    turned = direction[1] + 10.0 * tol / scale * np.cross(direction[1], [1.0, 0.0, 0.0])
+    starts = np.vstack([start, moved, start[0] + 10.0 * tol * side / np.linalg.norm(side), start[1]])
+    directions = np.vstack([direction, signs * direction, direction[0], turned / np.linalg.norm(turned)])
+    line = coincident_nodes(starts, directions, scale, tol)
+    np.testing.assert_array_equal(line, [0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 12, 13])
