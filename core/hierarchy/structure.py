@@ -15,6 +15,7 @@ import numpy as np
 import pythoncdt
 from scipy.spatial import cKDTree
 
+from ..errors import VisradError
 from .frames import build_frames, shared_edges
 from .geometry import (
     barycentric,
@@ -421,22 +422,30 @@ class HierarchyCore:
         out_xy = cdt.vertices_array()
         triangles = cdt.triangles_array()["vertices"].astype(np.int64)
         crossing_ids = _NO_IDS
+        # where the triangulation's points go: a crossing that lands on a point already there is that point
+        local = np.arange(len(out_xy))
         if len(out_xy) > len(cdt_xy):
             estimates = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
-            crossings = _exact_crossings(estimates, cdt_xy[seg_local])
-            crossing_ids = self._new_vertices(polygon, crossings, SEGMENT, True)
+            crossings = _exact_crossings(estimates, cdt_xy[seg_local], snap)
+            local[len(cdt_xy) :] = _same_points(cdt_xy, crossings, snap)
+            fresh = np.flatnonzero(local[len(cdt_xy) :] == np.arange(len(cdt_xy), len(out_xy)))
+            crossing_ids = np.full(len(crossings), -1, dtype=np.int64)
+            crossing_ids[fresh] = self._new_vertices(polygon, crossings[fresh], SEGMENT, True)
+            triangles = local[triangles]
+            flat = (triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2])
+            triangles = triangles[~(flat | (triangles[:, 0] == triangles[:, 2]))]
         global_of_local = np.concatenate([np.asarray(ring, dtype=np.int64), interior_ids, crossing_ids])
 
         constrained_pairs = set()
         if len(seg_local):
             for e in cdt.fixed_edges:
-                u, v = e.v1, e.v2
-                if not (u < n_ring and v < n_ring and (v - u) % n_ring in (1, n_ring - 1)):
+                u, v = int(local[e.v1]), int(local[e.v2])
+                if u != v and not (u < n_ring and v < n_ring and (v - u) % n_ring in (1, n_ring - 1)):
                     constrained_pairs.add((min(u, v), max(u, v)))
                     self._v_constrained.buf[global_of_local[[u, v]]] = True
 
         level = int(self._e_level.buf[element]) + 1
-        self._set_ancestry(element, corners, global_of_local, level)
+        self._set_ancestry(element, corners, global_of_local[global_of_local >= 0], level)
 
         count = len(triangles)
         first = self._new_elements(count, polygon, level, element)
@@ -646,11 +655,17 @@ def _merge_close(points: np.ndarray, eps: float) -> tuple:
     return points[keepers], representative
 
 
-def _exact_crossings(estimates: np.ndarray, segments: np.ndarray) -> np.ndarray:
+def _exact_crossings(estimates: np.ndarray, segments: np.ndarray, snap: float) -> np.ndarray:
     """Recompute crossing points (M, 2), found on rounded coordinates, as the exact intersection of the two
-    segments (S, 2, 2) passing nearest to each estimate."""
+    segments (S, 2, 2) passing nearest to each estimate; an intersection further than `snap` from its estimate
+    (segments nearly parallel, where the exact point is ill-conditioned) keeps the estimate."""
     if len(estimates) == 0:
         return estimates
+    if len(segments) < 2:
+        raise VisradError(
+            f"the triangulation of an element made {len(estimates)} crossing point(s) with fewer than two inner "
+            "segments: its outline crosses itself (a hierarchy defect, please report the scene)"
+        )
     a = segments[:, 0]
     d = segments[:, 1] - a
     length = np.linalg.norm(d, axis=1)
@@ -661,5 +676,26 @@ def _exact_crossings(estimates: np.ndarray, segments: np.ndarray) -> np.ndarray:
         det = cross2(d[first], d[second])
         if det != 0.0:
             s = cross2(a[second] - a[first], d[second]) / det
-            exact[m] = a[first] + s * d[first]
+            point = a[first] + s * d[first]
+            if np.hypot(*(point - x)) <= snap:
+                exact[m] = point
     return exact
+
+
+def _same_points(points: np.ndarray, extra: np.ndarray, snap: float) -> np.ndarray:
+    """(E,) int64: for each extra point (E, 2), the index of the first of points (N, 2) or of the earlier kept
+    extra points (N + j) within snap of it, or its own index N + e when there is none (it is kept)."""
+    count = len(points)
+    kept_xy = list(points)
+    kept_index = list(range(count))
+    result = np.empty(len(extra), dtype=np.int64)
+    for e, x in enumerate(extra):
+        gaps = np.hypot(*(np.asarray(kept_xy) - x).T)
+        nearest = int(np.argmin(gaps))
+        if gaps[nearest] <= snap:
+            result[e] = kept_index[nearest]
+        else:
+            result[e] = count + e
+            kept_xy.append(x)
+            kept_index.append(count + e)
+    return result
