@@ -424,8 +424,10 @@ def _relaxed_arc(
         if abs(rate) <= 1e-12:
             # the whole family stays in the face's plane (or parallel to it): it keeps grazing the face. A face
             # all generators bound is the one a horizon slides over, whose far edge is a clean end; another
-            # object's face in that plane makes the lines graze contacts (see END_PLANAR)
-            if abs(offset) <= 1e-12:
+            # object's face in that plane, reaching beyond the outer generators, makes the lines graze contacts
+            # where they end (see END_PLANAR)
+            beyond = sl_a[k] < g_tau[first] - tol or sl_b[k] > g_tau[last] + tol
+            if abs(offset) <= 1e-12 and beyond:
                 for j in range(n_retained):
                     if not _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
                         planar = True
@@ -614,6 +616,20 @@ def _relaxed_arc(
 
 
 @njit(cache=True)
+def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
+    """The scene edge every contact lo..hi-1 lies on (all edge contacts of one edge), else -1."""
+    edge = -1
+    for i in range(lo, hi):
+        if c_kind[i] != CONTACT_EDGE:
+            return -1
+        e = corner_edge[offsets[c_poly[i]] + c_local[i]]
+        if edge >= 0 and e != edge:
+            return -1
+        edge = e
+    return edge
+
+
+@njit(cache=True)
 def _validate_chunk(
     points, offsets, normals, plane_offsets, corner_vertex, corner_edge, areas,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
@@ -632,6 +648,9 @@ def _validate_chunk(
         for k in range(4):
             if cand_edges[c, k] >= 0:
                 bound += 2
+        if cand_vertices[c, 0] >= 0:
+            # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions
+            bound += 8
     node_cand = np.empty(n_cand, dtype=np.int64)
     node_kind = np.empty(n_cand, dtype=np.int8)
     node_gkind = np.zeros((n_cand, 4), dtype=np.int8)
@@ -839,6 +858,63 @@ def _validate_chunk(
                     node_end[node, side] = face_group[c_poly[g_lo[g]]]
                     break
                 g = g - 1 if side == 0 else g + 1
+
+        # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
+        # reached along the floor, a box edge grazed on the way) is where the lines through the other
+        # generators and that edge stop meeting the vertex: drop the vertex, keep the edge (the arcs of such
+        # over-determined lines, simplest configuration of seed 000 section 2.2)
+        for side in range(2):
+            if ng > 3:
+                break
+            g = first - 1 if side == 0 else last + 1
+            extra = -1
+            while 0 <= g < n_groups:
+                e = _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, g_lo[g], g_hi[g])
+                if e >= 0 and edge_mask[e]:
+                    extra = e
+                    break
+                count = g_hi[g] - g_lo[g]
+                if _group_blocked(
+                    points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
+                    angle_tol, arc_start, arc_len,
+                ):  # fmt: skip
+                    break
+                g = g - 1 if side == 0 else g + 1
+            if extra < 0:
+                continue
+            for j in range(ng):
+                if gk[j] != GEN_VERTEX:
+                    continue
+                n_retained = 0
+                norm = -1
+                for k in range(ng + 1):
+                    if k == j:
+                        continue
+                    r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
+                    r_id[n_retained] = gid[k] if k < ng else extra
+                    r_group[n_retained] = gg[k] if k < ng else g
+                    if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
+                        norm = n_retained
+                    n_retained += 1
+                norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                for sigma in (1.0, -1.0):
+                    ok, kind, e0, e1, s, direction = _relaxed_arc(
+                        points, offsets, normals, areas, vertices, edges, n_vertices,
+                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
+                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
+                        plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
+                        sl_poly, sl_a, sl_b, n_sliding, polys, kinds, locals_, arc_start, arc_len, codes,
+                    )  # fmt: skip
+                    if not ok:
+                        continue
+                    inc_node[n_inc] = node
+                    inc_kind[n_inc] = kind
+                    inc_codes[n_inc] = codes
+                    inc_end[n_inc, 0] = e0
+                    inc_end[n_inc, 1] = e1
+                    inc_s[n_inc] = s
+                    inc_dir[n_inc] = direction
+                    n_inc += 1
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
