@@ -414,8 +414,8 @@ def _relaxed_arc(
     before_poly = -1
     after_tau = np.inf
     after_poly = -1
-    touch_first = False
-    touch_last = False
+    touch = np.zeros(2, dtype=np.bool_)
+    touch_face = np.full(2, -1, dtype=np.int64)
     planar = False
     for k in range(n_sliding):
         n = normals[sl_poly[k]]
@@ -443,13 +443,21 @@ def _relaxed_arc(
                 handled = True
         if handled:
             continue
-        # a face of another object crossed at an outer generator (a box corner resting on the floor): the
-        # lines stop there, as they do at the arc's nodes where they do not lie in that face's plane
+        # a face of another object crossed at an outer generator (a box corner or edge resting on the floor):
+        # the lines end there as at the arc's nodes where they do not lie in that face's plane: stopped by a
+        # vertex, on the face beyond an edge
+        at = -1
         if abs(crossing - g_tau[first]) <= tol:
-            touch_first = True
-            continue
-        if abs(crossing - g_tau[last]) <= tol:
-            touch_last = True
+            at = 0
+        elif abs(crossing - g_tau[last]) <= tol:
+            at = 1
+        if at >= 0:
+            for j in range(n_retained):
+                if r_group[j] == (first if at == 0 else last):
+                    if r_kind[j] == GEN_VERTEX:
+                        touch[at] = True
+                    elif touch_face[at] < 0:
+                        touch_face[at] = sl_poly[k]
             continue
         if g_tau[first] + tol < crossing < g_tau[last] - tol:
             return False, 0, 0, 0, 0.0, 0
@@ -516,13 +524,11 @@ def _relaxed_arc(
                 ahead = shift - generator_shift if g == first else generator_shift - shift
                 if ahead > _SIDE_EPS:
                     return False, 0, 0, 0, 0.0, 0
-                if ahead >= -_SIDE_EPS:
-                    # the face passes through the edge (objects in contact): the lines stop there
-                    blocked = True
-                elif -ahead < nearest or (-ahead == nearest and areas[c_poly[i]] < areas[behind[side]]):
-                    # the lines cross this face just beyond the edge: it ends them, as it does at the arc's
-                    # other node, where the face is met further on (one key for both ends of the arc)
-                    nearest = -ahead
+                # the lines cross this face just beyond the edge, or at it (the edge lies on the face: objects
+                # in contact): it ends them, as it does at the arc's other node (one key for both ends)
+                beyond = max(-ahead, 0.0)
+                if beyond < nearest or (beyond == nearest and areas[c_poly[i]] < areas[behind[side]]):
+                    nearest = beyond
                     behind[side] = c_poly[i]
         else:
             for i in range(g_lo[g], g_hi[g]):
@@ -538,10 +544,12 @@ def _relaxed_arc(
             return False, 0, 0, 0, 0.0, 0
 
     end_before = END_FREE
-    if blocked_first or touch_first:
+    if blocked_first or touch[0]:
         end_before = END_TERMINAL
     elif behind[0] >= 0:
         end_before = face_group[behind[0]]
+    elif touch_face[0] >= 0:
+        end_before = face_group[touch_face[0]]
     else:
         for g in range(first - 1, -1, -1):
             if g_tau[g] < before_tau:
@@ -557,10 +565,12 @@ def _relaxed_arc(
         if end_before == END_FREE and before_poly >= 0:
             end_before = face_group[before_poly]
     end_after = END_FREE
-    if blocked_last or touch_last:
+    if blocked_last or touch[1]:
         end_after = END_TERMINAL
     elif behind[1] >= 0:
         end_after = face_group[behind[1]]
+    elif touch_face[1] >= 0:
+        end_after = face_group[touch_face[1]]
     else:
         for g in range(last + 1, n_groups):
             if g_tau[g] > after_tau:

@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from bench.scenes import BOX, LIGHT, WARM_WHITE, SceneBuilder, box_mesh
 from core.scene import Scene
+from tests.core.furnished_rooms import box_quads
 from tests.core.naive_skeleton import reaches
 
 DOWN = (0.0, 0.0, -1.0)
@@ -228,3 +229,20 @@ def _no_parallel_edges_across_objects(scene: Scene, angle: float) -> bool:
     sines = np.linalg.norm(np.cross(directions[:, None, :], directions[None, :, :]), axis=2)
     across = owner[:, None] != owner[None, :]
     return bool(sines[across].min() > angle)
+
+
+def boxes_in_room(boxes, size=(4.0, 3.0, 2.5)) -> Scene:
+    """A closed axis-aligned room of `size` (3,) (inward normals, from the origin) holding axis-aligned boxes
+    [(lo (3,), hi (3,))]: the degenerate configurations of everyday scenes (parallel edges, coplanar faces,
+    boxes resting on the floor or against a wall), one at a time."""
+    vertices, polygons = [], []
+    corners, quads = box_quads(np.zeros(3), np.asarray(size, dtype=np.float64))
+    vertices.extend(corners)
+    polygons.extend([list(reversed(q)) for q in quads])
+    for lo, hi in boxes:
+        corners, quads = box_quads(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+        base = len(vertices)
+        vertices.extend(corners)
+        polygons.extend([[base + i for i in q] for q in quads])
+    count = len(polygons)
+    return Scene.from_polygons(np.array(vertices), polygons, np.full((count, 3), 0.5), np.zeros((count, 3)))

@@ -21,7 +21,7 @@ from core.skeleton import build_skeleton
 from core.skeleton.validation import ARC_EV
 from core.visibility import exact_form_factors
 from tests.core.furnished_rooms import furnished_room
-from tests.core.skeleton_scenes import box_over_floor_scene, generic_closed_room, lamp_table_scene
+from tests.core.skeleton_scenes import box_over_floor_scene, boxes_in_room, generic_closed_room, lamp_table_scene
 
 EXACT = 1e-9
 
@@ -39,9 +39,15 @@ SCENES = {
     "generic room 2": lambda: generic_closed_room(2).scene,
     "lamp table": lambda: lamp_table_scene().scene,
     "furnished room 0": lambda: _furnished(0),
+    # one axis-aligned box in an axis-aligned room: floating (a face diagonal aligned with a room edge: three
+    # generators on one line), resting on the floor, against a wall
+    "floating box": lambda: boxes_in_room([((1.0, 1.0, 0.5), (1.7, 1.6, 1.1))]),
+    "box on floor": lambda: boxes_in_room([((1.0, 1.0, 0.0), (1.7, 1.6, 0.6))]),
+    "box on wall": lambda: boxes_in_room([((0.0, 1.0, 0.5), (0.7, 1.6, 1.1))]),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
+BOX_ROOMS = ["floating box", "box on floor", "box on wall"]
 
 DEGENERATE = pytest.mark.xfail(
     strict=True,
@@ -105,7 +111,8 @@ def test_view_arcs_have_both_end_nodes(name):
 
 @pytest.mark.parametrize(
     "name",
-    [pytest.param(name, marks=FACE_NODES) for name in ["generic room 0", "generic room 1", "generic room 2"]],
+    [pytest.param(name, marks=FACE_NODES) for name in ["generic room 0", "generic room 1", "generic room 2"]]
+    + BOX_ROOMS,
 )
 def test_no_dangling_arc_in_closed_rooms(name):
     skeleton = _skeleton(name)
@@ -125,6 +132,7 @@ def test_no_dangling_arc_in_closed_rooms(name):
     [
         "box over floor",
         "generic room 0",
+        *BOX_ROOMS,
         pytest.param("lamp table", marks=DEGENERATE),
         pytest.param("furnished room 0", marks=DEGENERATE),
     ],
@@ -176,7 +184,8 @@ def _touches(scene: Scene, polygon: int, point: np.ndarray, tol: float) -> bool:
 
 
 @pytest.mark.parametrize(
-    "name", ["generic room 0", "generic room 1", pytest.param("furnished room 0", marks=DEGENERATE)]
+    "name",
+    ["generic room 0", "generic room 1", "floating box", pytest.param("furnished room 0", marks=DEGENERATE)],
 )
 def test_vertex_form_factors_sum_to_one_in_closed_rooms(name):
     """Closed-room identity (DESIGN.md section 5.2), from the skeleton alone, at every convex corner of the
