@@ -798,10 +798,13 @@ def _validate_chunk(
         if missing:
             counters[REJECT_MISSING] += 1
             continue
+        # two edges met at one point cross there (objects in contact: a box's bottom edge across the top edge
+        # of the box it stands on): that point bounds the arcs along either edge like a vertex, so the line
+        # is a node; a vertex on an edge generator, or two vertices at one point, stay rejected
         coincident = False
         for j in range(ng):
             for k in range(j + 1, ng):
-                if gg[j] == gg[k]:
+                if gg[j] == gg[k] and not (gk[j] == GEN_EDGE and gk[k] == GEN_EDGE):
                     coincident = True
         if coincident:
             counters[REJECT_COINCIDENT] += 1
