@@ -58,6 +58,10 @@ class Skeleton:
         self.bvh = build_bvh(scene)
         self.vertex_mask = scene.vertex_kind == VERTEX_SILHOUETTE
         self.edge_mask = scene.edge_kind != EDGE_FLAT
+        self._rest_offsets, self._rest_faces = _resting_on(
+            scene.vertices, scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
+            scene.object_ids, self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
+        )  # fmt: skip
         self.sources: np.ndarray | None = np.empty(0, dtype=np.int64)
         self._node_parts: list[NodeChunk] = []
         self._incidence_parts: list[IncidenceChunk] = []
@@ -162,7 +166,7 @@ class Skeleton:
         self._arc_free = _arcs_leave_freely(
             arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
             scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
-            topo.vertex_faces, topo.vertex_face_corner, scene.tol.cosine,
+            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, scene.tol.cosine,
         )  # fmt: skip
         self._pair_first = first[order]
         self._pair_second = second[order]
@@ -696,13 +700,60 @@ def _edge_runs_forward(scene: Scene, face: int, edge: int) -> bool:
 
 
 @njit(cache=True)
+def _resting_on(vertices, points, offsets, normals, plane_offsets, object_ids, vf_off, vf_face, tol):
+    """CSR (offsets (V+1,) int64, faces int64): for each vertex, the polygons of other objects it lies inside
+    (strictly, by more than tol from their sides): a box corner resting on a table top, a leg's top corner
+    under it. Lines from the vertex into such a polygon's back side enter that object's solid at once."""
+    n_vertices = vertices.shape[0]
+    n_polygons = normals.shape[0]
+    lo = np.empty((n_polygons, 3))
+    hi = np.empty((n_polygons, 3))
+    for p in range(n_polygons):
+        for k in range(3):
+            lo[p, k] = points[offsets[p] : offsets[p + 1], k].min() - tol
+            hi[p, k] = points[offsets[p] : offsets[p + 1], k].max() + tol
+    counts = np.zeros(n_vertices + 1, dtype=np.int64)
+    pairs = []
+    for v in range(n_vertices):
+        x = vertices[v]
+        own = -1 if vf_off[v] == vf_off[v + 1] else object_ids[vf_face[vf_off[v]]]
+        for p in range(n_polygons):
+            if object_ids[p] == own:
+                continue
+            if (x[0] < lo[p, 0] or x[1] < lo[p, 1] or x[2] < lo[p, 2] or x[0] > hi[p, 0] or x[1] > hi[p, 1]
+                    or x[2] > hi[p, 2]):
+                continue
+            n = normals[p]
+            if abs(n[0] * x[0] + n[1] * x[1] + n[2] * x[2] + plane_offsets[p]) > tol:
+                continue
+            first = offsets[p]
+            count = offsets[p + 1] - first
+            inside = True
+            for k in range(count):
+                a = points[first + k]
+                side = np.cross(n, points[first + (k + 1) % count] - a)
+                if (x - a) @ side <= tol * np.sqrt(side @ side):
+                    inside = False
+                    break
+            if inside:
+                pairs.append((v, p))
+                counts[v + 1] += 1
+    found = np.empty(len(pairs), dtype=np.int64)
+    for i in range(len(pairs)):
+        found[i] = pairs[i][1]
+    return np.cumsum(counts), found
+
+
+@njit(cache=True)
 def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, points, offsets, normals,
-                       vf_off, vf_face, vf_corner, cosine):
+                       vf_off, vf_face, vf_corner, rest_off, rest_face, cosine):
     """(A,) bool: whether the lines of each EV arc leave its vertex towards its edge into free space, not into
     the solid the vertex bounds (interior swaths, seed 003 section 3.1). Projected along the line, the faces
     around the vertex are sectors; counted with the sign of normal . direction, they wind -1 around every
     direction exactly when the line enters the solid there. Constant along an arc: the winding changes only
-    where the line slides over a face of the vertex, which ends the arc at a node."""
+    where the line slides over a face of the vertex, which ends the arc at a node. A vertex resting inside
+    another object's face (rest_off, rest_face: see _resting_on) sends the lines behind that face into its
+    object: those are not free either."""
     result = np.ones(kind.shape[0], dtype=np.bool_)
     starts = np.empty(64)
     lengths = np.empty(64)
@@ -717,6 +768,13 @@ def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, po
         a = vertices[edges[e, 0]]
         direction = a + t * (vertices[edges[e, 1]] - a) - vertices[v]
         direction /= np.sqrt(direction @ direction)
+        behind = False
+        for i in range(rest_off[v], rest_off[v + 1]):
+            if normals[rest_face[i]] @ direction < -cosine:
+                behind = True
+        if behind:
+            result[arc] = False
+            continue
         e1, e2 = _perpendicular_frame(direction)
         count = 0
         for i in range(vf_off[v], min(vf_off[v + 1], vf_off[v] + 64)):

@@ -416,7 +416,7 @@ def _relaxed_arc(
     after_poly = -1
     touch = np.zeros(2, dtype=np.bool_)
     touch_face = np.full(2, -1, dtype=np.int64)
-    planar = False
+    planar = np.zeros(2, dtype=np.bool_)
     for k in range(n_sliding):
         n = normals[sl_poly[k]]
         rate = x[2] * _dot(n, f1) + x[3] * _dot(n, f2)
@@ -424,13 +424,19 @@ def _relaxed_arc(
         if abs(rate) <= 1e-12:
             # the whole family stays in the face's plane (or parallel to it): it keeps grazing the face. A face
             # all generators bound is the one a horizon slides over, whose far edge is a clean end; another
-            # object's face in that plane, reaching beyond the outer generators, makes the lines graze contacts
-            # where they end (see END_PLANAR)
-            beyond = sl_a[k] < g_tau[first] - tol or sl_b[k] > g_tau[last] + tol
-            if abs(offset) <= 1e-12 and beyond:
+            # object's face in that plane, reaching beyond an outer generator, makes the lines graze contacts
+            # where they end on that side (see END_PLANAR); the other side may be clean (a horizon over a table
+            # top from a box standing on it)
+            # A face bounded by the outer generator ends at it (its tolerant overlap may poke past): only faces
+            # the generator does not bound count on its side
+            if abs(offset) <= 1e-12:
                 for j in range(n_retained):
-                    if not _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
-                        planar = True
+                    if _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
+                        continue
+                    if r_group[j] == first and sl_a[k] < g_tau[first] - tol:
+                        planar[0] = True
+                    if r_group[j] == last and sl_b[k] > g_tau[last] + tol:
+                        planar[1] = True
             continue
         crossing = -offset / rate * diag
         if crossing < sl_a[k] - tol or crossing > sl_b[k] + tol:
@@ -586,8 +592,9 @@ def _relaxed_arc(
         if end_after == END_FREE and after_poly >= 0:
             end_after = face_group[after_poly]
 
-    if planar:
+    if planar[0]:
         end_before = END_PLANAR
+    if planar[1]:
         end_after = END_PLANAR
 
     param = -1
