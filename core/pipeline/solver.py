@@ -94,6 +94,7 @@ class Solver:
         self.lighting: _Lighting | None = None
         self.discontinuities: dict[int, list[np.ndarray]] = {}
         self._inserted_events: set[tuple[int, int]] = set()
+        self._rejected_events: set[tuple[int, int]] = set()
         self._events: dict[int, ReceiverEvents] = {}
         self.iterations = 0
         self.converged = False
@@ -201,27 +202,40 @@ class Solver:
             yield 1.0
             return
         regular = self.iterations < self.settings.regular_levels
+        rejected = []
         if regular:
             if self.iterations == 0:
                 record["maxima"] = self._insert_maxima(
                     hierarchy, state, np.unique(hierarchy.element_polygon()[refined])
                 )
             hierarchy.queue_regular_grid(refined)
+            hierarchy.complete_step()
         else:
             covered, inserted = self._insert_discontinuities(hierarchy, state, mesh, bad)
+            self._insert_worst_samples(hierarchy, mesh, bad & ~covered, worst)
+            try:
+                hierarchy.complete_step()
+            except (VisradError, RuntimeError) as error:
+                if not inserted:
+                    raise
+                # The triangulations could not take these discontinuities (a hierarchy defect, see the strict
+                # xfails of tests/core/test_hierarchy.py): this iteration refines at the worst samples instead,
+                # the events are not tried again, and the refinement log says so.
+                record["discontinuities_rejected"] = len(inserted)
+                record["rejection"] = str(error).splitlines()[0]
+                rejected = [(polygon, piece) for polygon, piece, _ in inserted]
+                inserted = []
+                hierarchy = copy.deepcopy(state.hierarchy)
+                self._insert_worst_samples(hierarchy, mesh, bad, worst)
+                hierarchy.complete_step()
             record["discontinuities"] = len(inserted)
-            for triangle in np.nonzero(bad & ~covered)[0]:
-                element = int(mesh.triangle_element[triangle])
-                polygon = int(mesh.triangle_polygon[triangle])
-                point = hierarchy.frames.to_2d(polygon, worst[triangle][None, :])
-                hierarchy.insert_into_element(element, point, np.zeros((0, 2, 2)))
-        hierarchy.complete_step()
         yield 0.4
         parts = [state.links]
         for fraction in self._link_refined_vertices(hierarchy, state, mesh, exact, parts):
             yield 0.4 + 0.5 * fraction
         checks = carry(checks, mesh, exact, hierarchy.export_leaves(), self._emitters)
         self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts), checks)
+        self._rejected_events.update(rejected)
         if not regular:
             for polygon, piece, segment in inserted:
                 self._inserted_events.add((polygon, piece))
@@ -274,6 +288,7 @@ class Solver:
             "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
             "polygons": self.scene.n_polygons,
             "discontinuities_inserted": len(self._inserted_events),
+            "discontinuities_rejected": len(self._rejected_events),
             "discontinuities_available": sum(len(events.pieces) for events in self._events.values()),
         }
         if self.skeleton is not None:
@@ -442,6 +457,14 @@ class Solver:
             shown &= ~inside_regions(centroids, mesh.triangle_polygon, self.scene, self.contacts)
         return shown
 
+    def _insert_worst_samples(self, hierarchy: Hierarchy, mesh, leaves: np.ndarray, worst: np.ndarray) -> None:
+        """Queue into each leaf of `leaves` (T,) bool its worst sample (T, 3) (the radiometric refinement)."""
+        for triangle in np.flatnonzero(leaves):
+            element = int(mesh.triangle_element[triangle])
+            polygon = int(mesh.triangle_polygon[triangle])
+            point = hierarchy.frames.to_2d(polygon, worst[triangle][None, :])
+            hierarchy.insert_into_element(element, point, np.zeros((0, 2, 2)))
+
     def _insert_discontinuities(self, hierarchy: Hierarchy, state: _Lighting, mesh, bad: np.ndarray) -> tuple:
         """Queue the ranked visual events of the emitters (section 6.4) onto the polygons of the leaves that
         need refining: on each polygon the pieces of events (collinear traces merged) not inserted yet that cross
@@ -464,7 +487,8 @@ class Solver:
                 to_2d(polygon, corners[leaves].reshape(-1, 3)).reshape(-1, 3, 2),
                 self.scene.tol.length,
             )
-            fresh = np.array([(polygon, g) not in self._inserted_events for g in range(len(events.pieces))])
+            tried = self._inserted_events | self._rejected_events
+            fresh = np.array([(polygon, g) not in tried for g in range(len(events.pieces))])
             candidates = np.flatnonzero(meets.any(axis=1) & fresh)
             if not len(candidates):
                 continue

@@ -102,3 +102,30 @@ def test_crossing_agrees_with_a_naive_test():
     expected = np.array([[_naive_meets(s, t) for t in triangles] for s in segments])
     np.testing.assert_array_equal(meets, expected)
     assert 0.05 < meets.mean() < 0.95
+
+
+def test_discontinuities_the_triangulation_cannot_take_are_rejected_and_said(monkeypatch):
+    """When completing a step with discontinuities fails (a hierarchy defect), that iteration refines at the
+    worst samples, the events are not tried again and the refinement log and stats say so."""
+    from core.errors import VisradError
+    from core.hierarchy import Hierarchy
+
+    setup = box_over_floor_scene()
+    complete = Hierarchy.complete_step
+    failures = []
+
+    def failing_once_with_segments(self):
+        # the queue holds [points, segments, grid step] per element
+        if not failures and any(entry[1] for entry in self._queue.values()):
+            failures.append(True)
+            raise VisradError("a hierarchy defect")
+        return complete(self)
+
+    monkeypatch.setattr(Hierarchy, "complete_step", failing_once_with_segments)
+    result = Solver(setup.scene, Settings(max_iterations=4, jnd=0.01)).solve()
+    third = result.stats["refinement"][2]
+    assert failures and third["discontinuities"] == 0 and third["discontinuities_rejected"] > 0
+    assert third["rejection"] == "a hierarchy defect"
+    assert result.stats["discontinuities_rejected"] == third["discontinuities_rejected"]
+    assert result.stats["discontinuities_inserted"] == sum(len(v) for v in result.discontinuities.values())
+    assert result.stats["refinement"][3]["leaves"] > third["leaves"], "the third iteration still refined"
