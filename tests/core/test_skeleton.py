@@ -16,6 +16,7 @@ from functools import cache
 import numpy as np
 import pytest
 
+from core.errors import VisradError
 from core.scene import Scene
 from core.skeleton import build_skeleton
 from core.skeleton.validation import ARC_EV
@@ -44,6 +45,8 @@ SCENES = {
     "floating box": lambda: boxes_in_room([((1.0, 1.0, 0.5), (1.7, 1.6, 1.1))]),
     "box on floor": lambda: boxes_in_room([((1.0, 1.0, 0.0), (1.7, 1.6, 0.6))]),
     "box on wall": lambda: boxes_in_room([((0.0, 1.0, 0.5), (0.7, 1.6, 1.1))]),
+    # a small box standing inside the top of a big one resting on the floor
+    "box on box": lambda: boxes_in_room([((1.0, 1.0, 0.0), (2.6, 2.2, 0.75)), ((1.3, 1.4, 0.75), (1.55, 1.6, 1.0))]),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
@@ -51,8 +54,9 @@ BOX_ROOMS = ["floating box", "box on floor", "box on wall"]
 
 DEGENERATE = pytest.mark.xfail(
     strict=True,
-    reason="contacts and axis-aligned boxes: arcs whose end faces change on concave edges and coplanar faces "
-    "get no node (degenerate configurations of the 1999 paper, section 2.2, not handled yet)",
+    reason="touching and coplanar boxes: some views do not close yet (lines ending exactly on an edge of a box "
+    "they run into, boxes side by side or in a room corner: arcs whose end keys differ at their two nodes); "
+    "those queries are refused, see test_answered_form_factors_are_exact_in_degenerate_scenes",
 )
 FACE_NODES = pytest.mark.xfail(
     strict=True,
@@ -81,17 +85,82 @@ def _vertex_receivers(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return np.array(vertices), np.array(receivers)
 
 
-def _skeleton_form_factors(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices (Q,), receivers (Q,), form factors (Q, P)) from the skeleton's stored views."""
+def _skeleton_form_factors(name: str, refused: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (Q,), receivers (Q,), form factors (Q, P)) from the skeleton's stored views; with refused=True
+    a query the skeleton refuses (VisradError: a view that does not close) gives NaN instead of raising. Pairs
+    whose receiver is hidden by contact at the vertex are left out (see _hidden_by_contact)."""
     scene, skeleton = _scene(name), _skeleton(name)
     vertices, receivers = _vertex_receivers(scene)
+    keep = ~_hidden_by_contact(scene, vertices, receivers)
+    vertices, receivers = vertices[keep], receivers[keep]
+
+    def query(v, source, r):
+        try:
+            return skeleton.form_factor(int(v), source, int(r))
+        except VisradError:
+            if not refused:
+                raise
+            return np.nan
+
     values = np.array(
-        [
-            [skeleton.form_factor(int(v), source, int(r)) for source in range(scene.n_polygons)]
-            for v, r in zip(vertices, receivers, strict=True)
-        ]
+        [[query(v, source, r) for source in range(scene.n_polygons)] for v, r in zip(vertices, receivers, strict=True)]
     )
     return vertices, receivers, values
+
+
+def _resting_on(scene: Scene) -> list[list[int]]:
+    """For each vertex, the polygons of other objects it lies on (touching objects), sides included."""
+    tol = 16.0 * scene.tol.length
+    result = []
+    for vertex in range(scene.n_vertices):
+        own = {int(scene.object_ids[p]) for p in range(scene.n_polygons) if vertex in scene.polygon_vertices(p)}
+        point = scene.vertices[vertex]
+        result.append(
+            [
+                p
+                for p in range(scene.n_polygons)
+                if int(scene.object_ids[p]) not in own and _touches(scene, p, point, tol)
+            ]
+        )
+    return result
+
+
+def _hidden_by_contact(scene: Scene, vertices: np.ndarray, receivers: np.ndarray) -> np.ndarray:
+    """(Q,) bool: the receiver faces a polygon the vertex rests on (a box bottom on the table top): its
+    hemisphere there lies inside the other object; the solver culls such faces (DESIGN.md section 4)."""
+    resting = _resting_on(scene)
+    return np.array(
+        [
+            any(scene.normals[p] @ scene.normals[r] < -0.5 for p in resting[v])
+            for v, r in zip(vertices, receivers, strict=True)
+        ],
+        dtype=bool,
+    )
+
+
+def _exact_from_the_free_side(scene: Scene, vertices: np.ndarray, receivers: np.ndarray, source: int) -> np.ndarray:
+    """(Q,) exact_form_factors at the vertices, taken at vertices resting on another object in the limit from
+    the free side. The oracle clips blockers against the point's own position: at a box corner on a table top
+    it sees through the table (its top face is edge-on, its other faces turned away). The limit is
+    extrapolated (Richardson) from two points moved off by h and 2h along the receiver's normal plus the
+    normals of the faces the vertex rests on: error O(h^2). Sources whose plane holds the vertex stay at the
+    convention of both (edge-on: 0)."""
+    points = scene.vertices[vertices]
+    normals = scene.normals[receivers]
+    exact = exact_form_factors(scene, points, normals, source)
+    resting = _resting_on(scene)
+    moved = np.array([len(resting[v]) > 0 for v in vertices], dtype=bool)
+    moved &= np.abs(points @ scene.normals[source] + scene.plane_offsets[source]) > scene.tol.length
+    if not moved.any():
+        return exact
+    rests = [sum((scene.normals[p] for p in resting[v]), np.zeros(3)) for v in vertices[moved]]
+    away = normals[moved] + np.array(rests)
+    away /= np.linalg.norm(away, axis=1)[:, None]
+    h = 1e-7 * scene.diagonal
+    near = exact_form_factors(scene, points[moved] + h * away, normals[moved], source)
+    far = exact_form_factors(scene, points[moved] + 2.0 * h * away, normals[moved], source)
+    exact[moved] = 2.0 * near - far
+    return exact
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -141,12 +210,29 @@ def test_vertex_form_factors_are_exact(name):
     scene = _scene(name)
     vertices, receivers, values = _skeleton_form_factors(name)
     assert np.isfinite(values).all()
-    points = scene.vertices[vertices]
-    normals = scene.normals[receivers]
     for source in range(scene.n_polygons):
-        exact = exact_form_factors(scene, points, normals, source)
+        exact = _exact_from_the_free_side(scene, vertices, receivers, source)
         worst = int(np.argmax(np.abs(values[:, source] - exact)))
         assert abs(values[worst, source] - exact[worst]) <= EXACT, (
+            f"vertex {vertices[worst]}, receiver {receivers[worst]}, source {source}: "
+            f"skeleton {values[worst, source]!r}, exact {exact[worst]!r}"
+        )
+
+
+@pytest.mark.parametrize("name", ["box on box", "lamp table", "furnished room 0"])
+def test_answered_form_factors_are_exact_in_degenerate_scenes(name):
+    """Where views do not close yet the skeleton refuses (VisradError), never answers wrong: every answer at a
+    vertex of the lamp table or a furnished room (touching, stacked, coplanar boxes) is exact."""
+    scene = _scene(name)
+    vertices, receivers, values = _skeleton_form_factors(name, refused=True)
+    answered = np.isfinite(values)
+    print(f"\n{name}: {np.count_nonzero(~answered)} of {values.size} queries refused")
+    assert answered.mean() > 0.5
+    for source in range(scene.n_polygons):
+        exact = _exact_from_the_free_side(scene, vertices, receivers, source)
+        error = np.where(answered[:, source], np.abs(values[:, source] - exact), 0.0)
+        worst = int(np.argmax(error))
+        assert error[worst] <= EXACT, (
             f"vertex {vertices[worst]}, receiver {receivers[worst]}, source {source}: "
             f"skeleton {values[worst, source]!r}, exact {exact[worst]!r}"
         )
