@@ -167,7 +167,7 @@ class SolverStage(ModalStageOperator):
         before = 0.0
         for name in plan:
             weight = _WEIGHTS[name] / total
-            if name == "refine" and solver.converged:
+            if name == "refine" and (solver.converged or solver.stopped is not None):
                 before += weight
                 continue
             working = _working_copy(solver)
@@ -224,7 +224,10 @@ class SolverStage(ModalStageOperator):
         if solver.iterations == 0 and not solver.converged:
             return f"coarse lighting, {counts}"
         iterations = f"{solver.iterations} refinement iteration{'' if solver.iterations == 1 else 's'}"
-        return f"{iterations} ({'converged' if solver.converged else 'not converged'}), {counts}"
+        state = "converged" if solver.converged else "not converged"
+        if solver.stopped is not None:
+            state = f"refinement stopped: {solver.stopped}"
+        return f"{iterations} ({state}), {counts}"
 
 
 def _missing(solver) -> list[str]:

@@ -114,6 +114,8 @@ class HierarchyCore:
         self._he_twins: dict[int, list] = {}
         self._dirty: list[int] = []
         self._queue: dict[int, list] = {}
+        # inner segments left out of an element whose outline they crossed by a rounding error (see _subdivide)
+        self.dropped_segments = 0
 
         self._root_corners: list[np.ndarray] = []
         self._root_hedges: list[list[int]] = []
@@ -400,27 +402,17 @@ class HierarchyCore:
             dtype=np.int64,
         ).reshape(-1, 2)
 
-        # The triangulation sees integer coordinates in units of the length tolerance: its in-circle ties
-        # (regular grids are full of cocircular points) then break identically at every scene scale.
-        unit = eps / _CDT_UNITS_PER_TOLERANCE
-        cdt = pythoncdt.Triangulation(
-            pythoncdt.VertexInsertionOrder.AS_PROVIDED,
-            pythoncdt.IntersectingConstraintEdges.TRY_RESOLVE,
-            0.0,
-        )
         cdt_xy = np.concatenate([self._xy.buf[ring], interior_xy])
         origin = corner_xy[0]
-        cdt.insert_vertices(np.ascontiguousarray(np.round((cdt_xy - origin) / unit)))
-        ring_local = np.arange(n_ring)
-        edges = np.empty((n_ring + len(seg_local), 2), dtype=np.uint32)
-        edges[:n_ring, 0] = ring_local
-        edges[:n_ring, 1] = ring_local + 1
-        edges[n_ring - 1, 1] = 0
-        edges[n_ring:] = seg_local
-        cdt.insert_edges(edges)
-        cdt.erase_outer_triangles()
-        out_xy = cdt.vertices_array()
-        triangles = cdt.triangles_array()["vertices"].astype(np.int64)
+        unit = eps / _CDT_UNITS_PER_TOLERANCE
+        out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
+        if len(out_xy) > len(cdt_xy) and len(seg_local) < 2:
+            # A point made where no two inner segments cross: a segment ending a rounding error beyond the
+            # element's outline crossed it. The element is triangulated without its segments (the mesh does not
+            # follow them here; their ends stay vertices), which the statistics count.
+            self.dropped_segments += len(seg_local)
+            seg_local = seg_local[:0]
+            out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
         crossing_ids = _NO_IDS
         # where the triangulation's points go: a crossing that lands on a point already there is that point
         local = np.arange(len(out_xy))
@@ -653,6 +645,27 @@ def _merge_close(points: np.ndarray, eps: float) -> tuple:
         first = np.array([min(ball) for ball in cKDTree(points).query_ball_point(points, eps)], dtype=np.int64)
     keepers, representative = np.unique(first, return_inverse=True)
     return points[keepers], representative
+
+
+def _triangulate(xy: np.ndarray, origin: np.ndarray, unit: float, n_ring: int, segments: np.ndarray) -> tuple:
+    """Constrained Delaunay triangulation of points xy (N, 2) whose first n_ring make the outline, with inner
+    segments (S, 2) local indices: (points (M >= N) structured x/y, triangles (T, 3) int64, the triangulation).
+    The triangulation sees integer coordinates in units of the length tolerance: its in-circle ties (regular
+    grids are full of cocircular points) then break identically at every scene scale."""
+    cdt = pythoncdt.Triangulation(
+        pythoncdt.VertexInsertionOrder.AS_PROVIDED,
+        pythoncdt.IntersectingConstraintEdges.TRY_RESOLVE,
+        0.0,
+    )
+    cdt.insert_vertices(np.ascontiguousarray(np.round((xy - origin) / unit)))
+    edges = np.empty((n_ring + len(segments), 2), dtype=np.uint32)
+    edges[:n_ring, 0] = np.arange(n_ring)
+    edges[:n_ring, 1] = np.arange(n_ring) + 1
+    edges[n_ring - 1, 1] = 0
+    edges[n_ring:] = segments
+    cdt.insert_edges(edges)
+    cdt.erase_outer_triangles()
+    return cdt.vertices_array(), cdt.triangles_array()["vertices"].astype(np.int64), cdt
 
 
 def _exact_crossings(estimates: np.ndarray, segments: np.ndarray, snap: float) -> np.ndarray:

@@ -98,6 +98,8 @@ class Solver:
         self._events: dict[int, ReceiverEvents] = {}
         self.iterations = 0
         self.converged = False
+        # why refinement stopped before converging (a hierarchy defect), or None
+        self.stopped: str | None = None
         self.stage_seconds: dict[str, float] = {}
         self.refinement_log: list[dict] = []
         self._reflectance = np.repeat(scene.reflectance, 2, axis=0)
@@ -119,7 +121,7 @@ class Solver:
     def refine(self, iterations: int = 1) -> bool:
         """Run refinement iterations (subdivide, link, gather); True when converged (nothing perceptible)."""
         for _ in range(iterations):
-            if self.converged:
+            if self.converged or self.stopped is not None:
                 break
             self._run("refine", self.refine_steps())
         return self.converged
@@ -173,6 +175,9 @@ class Solver:
     def refine_steps(self):
         if self.lighting is None:
             yield from self.coarse_lighting_steps()
+        if self.stopped is not None:
+            yield 1.0
+            return
         state = self.lighting
         hierarchy = copy.deepcopy(state.hierarchy)
         mesh = hierarchy.export_leaves()
@@ -216,13 +221,17 @@ class Solver:
             try:
                 hierarchy.complete_step()
             except (VisradError, RuntimeError) as error:
-                if not inserted:
-                    raise
-                # The triangulations could not take these discontinuities (a hierarchy defect, see the strict
-                # xfails of tests/core/test_hierarchy.py): this iteration refines at the worst samples instead,
-                # the events are not tried again, and the refinement log says so.
-                record["discontinuities_rejected"] = len(inserted)
+                # The triangulations could not take this step (a hierarchy defect, see the strict xfails of
+                # tests/core/test_hierarchy.py). With discontinuities, the iteration refines at the worst samples
+                # instead and the events are not tried again; without, refinement stops at the last consistent
+                # state. Either way the refinement log says so.
                 record["rejection"] = str(error).splitlines()[0]
+                if not inserted:
+                    self.stopped = record["rejection"]
+                    self.refinement_log.append(record)
+                    yield 1.0
+                    return
+                record["discontinuities_rejected"] = len(inserted)
                 rejected = [(polygon, piece) for polygon, piece, _ in inserted]
                 inserted = []
                 hierarchy = copy.deepcopy(state.hierarchy)
@@ -253,7 +262,11 @@ class Solver:
             raise VisradError("no lighting yet: run coarse_lighting() (or solve()) first")
         state = self.lighting
         mesh = state.hierarchy.export_leaves()
-        shown = self._visible_triangles(mesh)
+        corners = mesh.vertices[mesh.triangles]
+        facing = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        # needles that the triangulation's integer rounding left without area (or turned over) carry nothing
+        has_area = np.einsum("ij,ij->i", facing, self.scene.normals[mesh.triangle_polygon]) > 0.0
+        shown = self._visible_triangles(mesh) & has_area
         front_tri, front_poly = mesh.triangles[shown], mesh.triangle_polygon[shown]
         used = np.unique(front_tri)
         remap = np.full(state.hierarchy.vertex_count, -1, dtype=np.int64)
@@ -284,6 +297,7 @@ class Solver:
             "seconds": dict(self.stage_seconds),
             "iterations": self.iterations,
             "converged": self.converged,
+            "stopped": self.stopped,
             "refinement": list(self.refinement_log),
             "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
             "polygons": self.scene.n_polygons,
