@@ -391,6 +391,15 @@ class HierarchyCore:
             ring.extend(chain)
             ring_hedges.extend(leaves)
         n_ring = len(ring)
+        lengths = np.hypot(*(np.roll(corner_xy, -1, axis=0) - corner_xy).T)
+        # an element whose corners lie on one line within the tolerance (integer rounding in the triangulation
+        # of its parent can leave such a needle, even turned over): nothing fits inside it, and a triangulation
+        # of its outline would see the outline cross itself. Its points go elsewhere; its sides are joined by a
+        # fan so that the leaves around still conform.
+        needle = k == 3 and cross2(corner_xy[1] - corner_xy[0], corner_xy[2] - corner_xy[0]) <= eps * lengths.max()
+        if needle:
+            interior_xy, interior_kind = _NO_POINTS, _NO_KINDS
+            seg_ends = seg_ends[:0]
         if n_ring == k and len(interior_xy) == 0 and len(seg_ends) == 0:
             return False
 
@@ -405,18 +414,22 @@ class HierarchyCore:
         cdt_xy = np.concatenate([self._xy.buf[ring], interior_xy])
         origin = corner_xy[0]
         unit = eps / _CDT_UNITS_PER_TOLERANCE
-        out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
-        if len(out_xy) > len(cdt_xy) and len(seg_local) < 2:
-            # A point made where no two inner segments cross: a segment ending a rounding error beyond the
-            # element's outline crossed it. The element is triangulated without its segments (the mesh does not
-            # follow them here; their ends stay vertices), which the statistics count.
-            self.dropped_segments += len(seg_local)
-            seg_local = seg_local[:0]
+        if needle:
+            out_xy = None
+            triangles = np.array([[0, i, i + 1] for i in range(1, n_ring - 1)], dtype=np.int64)
+        else:
             out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
+            if len(out_xy) > len(cdt_xy) and len(seg_local) < 2:
+                # A point made where no two inner segments cross: a segment ending a rounding error beyond the
+                # element's outline crossed it. The element is triangulated without its segments (the mesh does
+                # not follow them here; their ends stay vertices), which the statistics count.
+                self.dropped_segments += len(seg_local)
+                seg_local = seg_local[:0]
+                out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
         crossing_ids = _NO_IDS
         # where the triangulation's points go: a crossing that lands on a point already there is that point
-        local = np.arange(len(out_xy))
-        if len(out_xy) > len(cdt_xy):
+        local = np.arange(len(cdt_xy) if out_xy is None else len(out_xy))
+        if out_xy is not None and len(out_xy) > len(cdt_xy):
             estimates = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
             crossings = _exact_crossings(estimates, cdt_xy[seg_local], snap)
             local[len(cdt_xy) :] = _same_points(cdt_xy, crossings, snap)
