@@ -4,8 +4,8 @@ For each scene (Desk, Many Lights, Indirect bedroom, Village, Cornell box): tota
 memory, links, leaf triangles, iterations and convergence. Then the seed 000 Table 1 analogue on one scene:
 the final meshing of the exact solve re-gathered with 16, 36 and 64 jittered rays per form factor, time and
 error against the exact solution (mean relative error at the vertices brighter than one JND, share of vertices
-whose Ward display value differs by more than the JND). Paper figures (195 MHz R10000): Desk 4 min, Many Lights 10 min 23 s,
-Bedroom 11 min 10 s. Writes bench/results/solve.json.
+whose Ward display value differs by more than the JND). Paper figures (195 MHz R10000): Desk 4 min, Many
+Lights 10 min 23 s, Bedroom 11 min 10 s. Writes bench/results/solve.json.
 
 usage: python -m bench solve [--scenes desk,many_lights,...] [--max-iterations N] [--rays 16,36,64]
                              [--table1-scene NAME]
