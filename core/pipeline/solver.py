@@ -264,8 +264,9 @@ class Solver:
         mesh = state.hierarchy.export_leaves()
         corners = mesh.vertices[mesh.triangles]
         facing = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        # needles that the triangulation's integer rounding left without area (or turned over) carry nothing
-        has_area = np.einsum("ij,ij->i", facing, self.scene.normals[mesh.triangle_polygon]) > 0.0
+        # needles that the triangulation's integer rounding left without area (or turned over) carry nothing, and
+        # their orientation (how the add-on tells the two sides apart) would be rounding noise
+        has_area = np.einsum("ij,ij->i", facing, self.scene.normals[mesh.triangle_polygon]) > self.scene.tol.area
         shown = self._visible_triangles(mesh) & has_area
         front_tri, front_poly = mesh.triangles[shown], mesh.triangle_polygon[shown]
         used = np.unique(front_tri)
