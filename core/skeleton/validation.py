@@ -927,14 +927,10 @@ def _validate_chunk(
                     )  # fmt: skip
                     if not ok:
                         continue
-                    inc_node[n_inc] = node
-                    inc_kind[n_inc] = kind
-                    inc_codes[n_inc] = codes
-                    inc_end[n_inc, 0] = e0
-                    inc_end[n_inc, 1] = e1
-                    inc_s[n_inc] = s
-                    inc_dir[n_inc] = direction
-                    n_inc += 1
+                    n_inc = _record_incidence(
+                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
+                        direction,
+                    )  # fmt: skip
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
@@ -963,14 +959,10 @@ def _validate_chunk(
                     )  # fmt: skip
                     if not ok:
                         continue
-                    inc_node[n_inc] = node
-                    inc_kind[n_inc] = kind
-                    inc_codes[n_inc] = codes
-                    inc_end[n_inc, 0] = e0
-                    inc_end[n_inc, 1] = e1
-                    inc_s[n_inc] = s
-                    inc_dir[n_inc] = direction
-                    n_inc += 1
+                    n_inc = _record_incidence(
+                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
+                        direction,
+                    )  # fmt: skip
             else:
                 v = gid[j]
                 for slot in range(ve_off[v], ve_off[v + 1]):
@@ -1002,14 +994,10 @@ def _validate_chunk(
                     )  # fmt: skip
                     if not ok:
                         continue
-                    inc_node[n_inc] = node
-                    inc_kind[n_inc] = kind
-                    inc_codes[n_inc] = codes
-                    inc_end[n_inc, 0] = e0
-                    inc_end[n_inc, 1] = e1
-                    inc_s[n_inc] = s
-                    inc_dir[n_inc] = direction
-                    n_inc += 1
+                    n_inc = _record_incidence(
+                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
+                        direction,
+                    )  # fmt: skip
     return (
         node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
         node_dir[:n_nodes], node_tau[:n_nodes], node_end[:n_nodes],
@@ -1078,3 +1066,18 @@ class IncidenceChunk:
 
     def __len__(self) -> int:
         return len(self.node)
+
+
+@njit(cache=True)
+def _record_incidence(inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
+                      direction):  # fmt: skip
+    """Store one arc incidence (node, kind, generator codes, end keys, parameter, direction) at row n_inc;
+    returns the next free row."""
+    inc_node[n_inc] = node
+    inc_kind[n_inc] = kind
+    inc_codes[n_inc] = codes
+    inc_end[n_inc, 0] = e0
+    inc_end[n_inc, 1] = e1
+    inc_s[n_inc] = s
+    inc_dir[n_inc] = direction
+    return n_inc + 1
