@@ -31,15 +31,17 @@ class ReceiverEvents:
     """The candidate discontinuities of one receiver polygon (M events).
 
     segments (M, 2, 3) float64 traces on the receiver; emitter (M,) int64 the source of each event;
-    blocker_size (M,) float64 D(b); blocker_point (M, 2, 3) float64 the point of the blocker's generators
-    nearest the line joining each end of the trace to the emitter's centre; pieces (G, 2, 3) float64 the
-    segments to insert: the traces with collinear overlapping ones merged (several swaths can trace the same
-    line, and a triangulation cannot take overlapping constraints); group (M,) int64 the piece of each trace.
+    blocker_size (M,) float64 D(b); emitter_size (M,) float64 D(s); blocker_point (M, 2, 3) float64 the point
+    of the blocker's generators nearest the line joining each end of the trace to the emitter's centre;
+    pieces (G, 2, 3) float64 the segments to insert: the traces with collinear overlapping ones merged
+    (several swaths can trace the same line, and a triangulation cannot take overlapping constraints);
+    group (M,) int64 the piece of each trace.
     """
 
     segments: np.ndarray
     emitter: np.ndarray
     blocker_size: np.ndarray
+    emitter_size: np.ndarray
     blocker_point: np.ndarray
     pieces: np.ndarray
     group: np.ndarray
@@ -71,10 +73,13 @@ def receiver_events(skeleton, scene, receiver: int, emitters) -> ReceiverEvents:
             points.append([_nearest_on_elements(scene, blocking, end, centre) for end in trace])
     if not segments:
         empty = np.empty((0, 2, 3))
-        return ReceiverEvents(empty, np.empty(0, np.int64), np.empty(0), empty, empty, np.empty(0, np.int64))
+        return ReceiverEvents(
+            empty, np.empty(0, np.int64), np.empty(0), np.empty(0), empty, empty, np.empty(0, np.int64)
+        )
     segments = np.array(segments)
+    emitter = np.array(emitter)
     pieces, group = merge_collinear(segments, scene.tol.snap)
-    return ReceiverEvents(segments, np.array(emitter), np.array(sizes), np.array(points), pieces, group)
+    return ReceiverEvents(segments, emitter, np.array(sizes), diameters[emitter], np.array(points), pieces, group)
 
 
 def merge_collinear(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -126,7 +131,6 @@ def event_variation(events: ReceiverEvents, which, scene, receiver: int, radiate
         return np.empty(0)
     rho = float(scene.reflectance[receiver] @ LUMINANCE_WEIGHTS)
     source_luminance = (np.asarray(radiated) @ LUMINANCE_WEIGHTS).reshape(-1, 2).max(axis=1)
-    diameters = _polygon_diameters(scene)
     emitter = events.emitter[which]
     normals = np.tile(scene.normals[receiver], (len(which), 1))
     centres = scene.centroids[emitter]
@@ -144,7 +148,7 @@ def event_variation(events: ReceiverEvents, which, scene, receiver: int, radiate
         to_source = np.linalg.norm(centres - points, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             projected = events.blocker_size[which] * to_source / to_blocker
-            penumbra = diameters[emitter] * to_blocker / to_source
+            penumbra = events.emitter_size[which] * to_blocker / to_source
             occlusion = np.where(to_blocker > 0.0, np.minimum(1.0, 0.25 * np.pi * projected**2 / areas), 1.0)
             sharpness = np.where(penumbra > 0.0, np.minimum(1.0, receiver_size / penumbra), 1.0)
         variation = np.maximum(variation, unoccluded * occlusion * sharpness)
