@@ -4,17 +4,16 @@ The grid is a triangular lattice aligned with the element's longest side, so tha
 triangulation is made of nearly equilateral triangles; its step is a function of the element's size.
 Grid points too close to externally supplied points (light maxima, section 6.3), to constrained segments or
 to points already on the element's sides are skipped, so the mesh stays nearly regular around them.
+
+Every element of a grid step calls these functions once, so they are numba kernels: numpy's per-call
+overhead on arrays of three corners used to be most of a grid step.
 """
 
 import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from .geometry import cross2, segment_distances
-
-_NO_PARAMETERS = np.zeros(0)
-_NO_POINTS = np.zeros((0, 2))
+from numba import njit
 
 
 @dataclass(frozen=True)
@@ -43,16 +42,32 @@ def side_grid_parameters(
     """Parameters t in (0, 1) of grid points on side a -> b (2,), evenly spaced about `step` apart,
     without those within `radius` of any point of keep_away (M, 2). Returns (n,) float64, increasing.
     slack (the length tolerance) breaks ties the same way whatever the scene's scale."""
-    length = math.hypot(b[0] - a[0], b[1] - a[1])
+    keep_away = np.ascontiguousarray(keep_away, dtype=np.float64).reshape(-1, 2)
+    return _side_grid(float(a[0]), float(a[1]), float(b[0]), float(b[1]), float(step), keep_away, float(radius),
+                      float(slack))  # fmt: skip
+
+
+@njit(cache=True)
+def _side_grid(ax, ay, bx, by, step, keep_away, radius, slack):
+    length = math.hypot(bx - ax, by - ay)
     count = int(math.floor((length + slack) / step + 0.5))
     if count <= 1:
-        return _NO_PARAMETERS
-    t = np.arange(1, count) / count
-    if len(keep_away) == 0:
-        return t
-    points = a[None, :] + t[:, None] * (b - a)[None, :]
-    far = np.min(np.linalg.norm(points[:, None, :] - keep_away[None, :, :], axis=2), axis=1) > radius - slack
-    return t[far]
+        return np.zeros(0)
+    t = np.empty(count - 1)
+    kept = 0
+    for i in range(1, count):
+        ti = i / count
+        x = ax + ti * (bx - ax)
+        y = ay + ti * (by - ay)
+        far = True
+        for m in range(len(keep_away)):
+            if math.sqrt((x - keep_away[m, 0]) ** 2 + (y - keep_away[m, 1]) ** 2) <= radius - slack:
+                far = False
+                break
+        if far:
+            t[kept] = ti
+            kept += 1
+    return t[:kept]
 
 
 def interior_grid_points(
@@ -70,34 +85,84 @@ def interior_grid_points(
     slack (the length tolerance) resolves the exact ties of regular shapes identically at every scale.
     Returns (N, 2) float64.
     """
-    sides = np.concatenate([corners[1:], corners[:1]]) - corners
-    lengths = np.sqrt(np.einsum("ij,ij->i", sides, sides))
-    longest = int(np.argmax(lengths >= lengths.max() - slack))
+    return _interior_grid(
+        np.ascontiguousarray(corners, dtype=np.float64).reshape(-1, 2),
+        float(step),
+        np.ascontiguousarray(keep_away_points, dtype=np.float64).reshape(-1, 2),
+        np.ascontiguousarray(keep_away_segments, dtype=np.float64).reshape(-1, 2, 2),
+        float(radius),
+        float(slack),
+    )
+
+
+@njit(cache=True)
+def _segment_distance(x, y, ax, ay, bx, by):
+    """Distance from (x, y) to the closed segment a b (a point when a = b)."""
+    ux, uy = bx - ax, by - ay
+    length2 = ux * ux + uy * uy
+    t = 0.0
+    if length2 > 0.0:
+        t = min(1.0, max(0.0, ((x - ax) * ux + (y - ay) * uy) / length2))
+    return math.sqrt((x - (ax + t * ux)) ** 2 + (y - (ay + t * uy)) ** 2)
+
+
+@njit(cache=True)
+def _interior_grid(corners, step, keep_points, keep_segments, radius, slack):
+    k = len(corners)
+    sides = np.empty((k, 2))
+    lengths = np.empty(k)
+    for i in range(k):
+        j = (i + 1) % k
+        sides[i, 0] = corners[j, 0] - corners[i, 0]
+        sides[i, 1] = corners[j, 1] - corners[i, 1]
+        lengths[i] = math.sqrt(sides[i, 0] ** 2 + sides[i, 1] ** 2)
+    top = lengths.max()
+    longest = 0
+    while lengths[longest] < top - slack:
+        longest += 1
     count = max(1, int(math.floor((lengths[longest] + slack) / step + 0.5)))
     dx = lengths[longest] / count
     # No point of a convex polygon is further than 2 area / perimeter from its boundary.
-    area = 0.5 * float(cross2(corners, corners + sides).sum())
-    if 2.0 * area / lengths.sum() <= 0.5 * dx - slack:
-        return _NO_POINTS
-    axis = sides[longest] / lengths[longest]
-    normal = np.array([-axis[1], axis[0]])
-    local = np.stack([(corners - corners[longest]) @ axis, (corners - corners[longest]) @ normal], axis=1)
+    twice_area = 0.0
+    for i in range(k):
+        twice_area += corners[i, 0] * (corners[i, 1] + sides[i, 1]) - corners[i, 1] * (corners[i, 0] + sides[i, 0])
+    if twice_area / lengths.sum() <= 0.5 * dx - slack:
+        return np.zeros((0, 2))
+    ox, oy = corners[longest, 0], corners[longest, 1]
+    axis_x, axis_y = sides[longest, 0] / lengths[longest], sides[longest, 1] / lengths[longest]
+    normal_x, normal_y = -axis_y, axis_x
+    x_min, x_max, y_max = np.inf, -np.inf, -np.inf
+    for i in range(k):
+        lx = (corners[i, 0] - ox) * axis_x + (corners[i, 1] - oy) * axis_y
+        ly = (corners[i, 0] - ox) * normal_x + (corners[i, 1] - oy) * normal_y
+        x_min, x_max, y_max = min(x_min, lx), max(x_max, lx), max(y_max, ly)
     dy = dx * np.sqrt(3.0) / 2.0
-    rows = np.arange(1, int(np.floor((local[:, 1].max() + slack) / dy)) + 1)
-    if len(rows) == 0:
-        return _NO_POINTS
-    x_min, x_max = local[:, 0].min(), local[:, 0].max()
-    columns = np.arange(int(np.floor(x_min / dx)) - 1, int(np.ceil(x_max / dx)) + 2)
-    xs = columns[None, :] * dx + (rows[:, None] % 2) * (0.5 * dx)
-    ys = np.broadcast_to(rows[:, None] * dy, xs.shape)
-    candidates = corners[longest] + xs.reshape(-1, 1) * axis + ys.reshape(-1, 1) * normal
-    inside = cross2(sides[None, :, :], candidates[:, None, :] - corners[None, :, :]) / lengths[None, :]
-    keep = inside.min(axis=1) > 0.5 * dx - slack
-    candidates = candidates[keep]
-    if len(candidates) and len(keep_away_points):
-        near = np.linalg.norm(candidates[:, None, :] - keep_away_points[None, :, :], axis=2).min(axis=1)
-        candidates = candidates[near > radius - slack]
-    if len(candidates) and len(keep_away_segments):
-        near = segment_distances(candidates, keep_away_segments[:, 0], keep_away_segments[:, 1]).min(axis=1)
-        candidates = candidates[near > radius - slack]
-    return candidates
+    n_rows = int(np.floor((y_max + slack) / dy))
+    first_column = int(np.floor(x_min / dx)) - 1
+    last_column = int(np.ceil(x_max / dx)) + 1
+    out = np.empty((max(0, n_rows) * max(0, last_column - first_column + 1), 2))
+    kept = 0
+    for row in range(1, n_rows + 1):
+        y = row * dy
+        for column in range(first_column, last_column + 1):
+            x = column * dx + (row % 2) * (0.5 * dx)
+            px = ox + x * axis_x + y * normal_x
+            py = oy + x * axis_y + y * normal_y
+            inside = np.inf
+            for i in range(k):
+                distance = (sides[i, 0] * (py - corners[i, 1]) - sides[i, 1] * (px - corners[i, 0])) / lengths[i]
+                inside = min(inside, distance)
+            if inside <= 0.5 * dx - slack:
+                continue
+            near = np.inf
+            for m in range(len(keep_points)):
+                near = min(near, math.sqrt((px - keep_points[m, 0]) ** 2 + (py - keep_points[m, 1]) ** 2))
+            for s in range(len(keep_segments)):
+                near = min(near, _segment_distance(px, py, keep_segments[s, 0, 0], keep_segments[s, 0, 1],
+                                                   keep_segments[s, 1, 0], keep_segments[s, 1, 1]))  # fmt: skip
+            if near <= radius - slack:
+                continue
+            out[kept, 0] = px
+            out[kept, 1] = py
+            kept += 1
+    return out[:kept]

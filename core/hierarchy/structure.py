@@ -11,6 +11,8 @@ is subdivided with the split points (anchoring), so leaves conform. Sides of dif
 the same two endpoints are twins: splitting one splits the others at the same 3-D point.
 """
 
+import math
+
 import numpy as np
 import pythoncdt
 from scipy.spatial import cKDTree
@@ -144,6 +146,18 @@ class HierarchyCore:
         self._v_kind.buf[start : start + count] = kind
         return np.arange(start, start + count)
 
+    def _new_vertex(self, polygon: int, x: float, y: float, kind: int) -> int:
+        """One vertex (see _new_vertices), without building arrays."""
+        vertex = self._xy.grow(1)
+        for column in (self._v_polygon, self._v_level, self._v_element, self._v_anc, self._v_w, self._v_kind):
+            column.grow(1)
+        self._v_constrained.grow(1)
+        self._xy.buf[vertex] = (x, y)
+        self._v_polygon.buf[vertex] = polygon
+        self._v_constrained.buf[vertex] = False
+        self._v_kind.buf[vertex] = kind
+        return vertex
+
     def _new_hedge(self, a: int, b: int, constrained: bool = False) -> int:
         self._he_a.append(a)
         self._he_b.append(b)
@@ -215,16 +229,19 @@ class HierarchyCore:
     def _side_vertex(self, hedge: int, forward: bool, t_side: float, snap_distance: float, kind: int) -> int:
         """The vertex at parameter t_side along an element side (its HEdge `hedge`, in side order): an
         existing vertex within snap_distance, or a new one of provenance `kind` splitting the leaf sub-HEdge."""
+        # Plain floats: this runs once per point on a side, and numpy's per-call overhead on 2-vectors
+        # dominated grid steps.
         xy = self._xy.buf
-        a = xy[self._he_a[hedge]]
-        b = xy[self._he_b[hedge]]
+        ax, ay = xy[self._he_a[hedge]].tolist()
+        bx, by = xy[self._he_b[hedge]].tolist()
         t = t_side if forward else 1.0 - t_side
-        direction = b - a
-        length = float(np.hypot(direction[0], direction[1]))
-        snap = snap_distance / length
+        dx, dy = bx - ax, by - ay
+        length2 = dx * dx + dy * dy
+        snap = snap_distance / math.sqrt(length2)
 
         def param(vertex: int) -> float:
-            return float((xy[vertex] - a) @ direction) / (length * length)
+            x, y = xy[vertex].tolist()
+            return ((x - ax) * dx + (y - ay) * dy) / length2
 
         h = hedge
         while True:
@@ -253,8 +270,8 @@ class HierarchyCore:
             a = self._he_a[member]
             b = self._he_b[member]
             t = 1.0 - t_local if flipped else t_local
-            position = xy[a] + t * (xy[b] - xy[a])
-            vertex = int(self._new_vertices(int(self._v_polygon.buf[a]), position[None, :], kind)[0])
+            (ax, ay), (bx, by) = xy[a].tolist(), xy[b].tolist()
+            vertex = self._new_vertex(int(self._v_polygon.buf[a]), ax + t * (bx - ax), ay + t * (by - ay), kind)
             xy = self._xy.buf
             constrained = self._he_constrained[member]
             first = self._new_hedge(a, vertex, constrained)
@@ -295,12 +312,13 @@ class HierarchyCore:
         else:
             ancestors = self._e_vertices.buf[owner]
         xy = self._xy.buf
-        direction = xy[b] - xy[a]
-        t = float((xy[vertex] - xy[a]) @ direction) / float(direction @ direction)
+        (ax, ay), (bx, by), (x, y) = xy[a].tolist(), xy[b].tolist(), xy[vertex].tolist()
+        dx, dy = bx - ax, by - ay
+        t = ((x - ax) * dx + (y - ay) * dy) / (dx * dx + dy * dy)
         self._v_level.buf[vertex] = self._e_level.buf[owner] + 1
         self._v_element.buf[vertex] = owner
         self._v_anc.buf[vertex] = ancestors
-        self._v_w.buf[vertex] = np.where(ancestors == a, 1.0 - t, np.where(ancestors == b, t, 0.0))
+        self._v_w.buf[vertex] = [1.0 - t if c == a else (t if c == b else 0.0) for c in ancestors.tolist()]
 
     # ------------------------------------------------------------------ subdivision of one element
 
@@ -391,12 +409,11 @@ class HierarchyCore:
             ring.extend(chain)
             ring_hedges.extend(leaves)
         n_ring = len(ring)
-        lengths = np.hypot(*(np.roll(corner_xy, -1, axis=0) - corner_xy).T)
         # an element whose corners lie on one line within the tolerance (integer rounding in the triangulation
         # of its parent can leave such a needle, even turned over): nothing fits inside it, and a triangulation
         # of its outline would see the outline cross itself. Its points go elsewhere; its sides are joined by a
         # fan so that the leaves around still conform.
-        needle = k == 3 and cross2(corner_xy[1] - corner_xy[0], corner_xy[2] - corner_xy[0]) <= eps * lengths.max()
+        needle = k == 3 and float(cross2(side_vectors[0], -side_vectors[2])) <= eps * float(side_lengths.max())
         if needle:
             interior_xy, interior_kind = _NO_POINTS, _NO_KINDS
             seg_ends = seg_ends[:0]
