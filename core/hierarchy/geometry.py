@@ -1,6 +1,7 @@
-"""Small vectorised 2-D predicates of the hierarchy: barycentric coordinates, clipping, distances, angles."""
+"""Small 2-D predicates of the hierarchy: barycentric coordinates, clipping (a numba kernel), distances, angles."""
 
 import numpy as np
+from numba import njit
 
 
 def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -29,32 +30,31 @@ def clip_segment_to_polygon(polygons: np.ndarray, p: np.ndarray, q: np.ndarray) 
 
     Returns (t_in, t_out), each (C,) float64; a polygon misses the segment where t_out <= t_in.
     """
-    corners = np.asarray(polygons, dtype=np.float64)
-    edges = np.roll(corners, -1, axis=1) - corners
-    d = q - p
-    num = cross2(edges, p[None, None, :] - corners)
-    den = cross2(edges, np.broadcast_to(d, edges.shape))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -num / den
-    entering = den > 0.0
-    leaving = den < 0.0
-    parallel_outside = (den == 0.0) & (num < 0.0)
-    t_in = np.maximum(0.0, np.where(entering, t, -np.inf).max(axis=1))
-    t_out = np.minimum(1.0, np.where(leaving, t, np.inf).min(axis=1))
-    t_out = np.where(parallel_outside.any(axis=1), -np.inf, t_out)
+    corners = np.ascontiguousarray(polygons, dtype=np.float64)
+    return _clip_segment(corners, float(p[0]), float(p[1]), float(q[0]), float(q[1]))
+
+
+@njit(cache=True)
+def _clip_segment(corners, px, py, qx, qy):
+    count, k = corners.shape[0], corners.shape[1]
+    t_in = np.zeros(count)
+    t_out = np.ones(count)
+    dx, dy = qx - px, qy - py
+    for c in range(count):
+        for i in range(k):
+            j = (i + 1) % k
+            ex = corners[c, j, 0] - corners[c, i, 0]
+            ey = corners[c, j, 1] - corners[c, i, 1]
+            num = ex * (py - corners[c, i, 1]) - ey * (px - corners[c, i, 0])
+            den = ex * dy - ey * dx
+            if den > 0.0:
+                t_in[c] = max(t_in[c], -num / den)
+            elif den < 0.0:
+                t_out[c] = min(t_out[c], -num / den)
+            elif num < 0.0:
+                t_out[c] = -np.inf
+                break
     return t_in, t_out
-
-
-def segment_distances(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance from each point (M, 2) to each segment a[j] b[j] (S, 2): (M, S) float64."""
-    ab = b - a
-    length2 = np.einsum("ij,ij->i", ab, ab)
-    ap = points[:, None, :] - a[None, :, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.einsum("msk,sk->ms", ap, ab) / length2
-    t = np.clip(np.nan_to_num(t, nan=0.0), 0.0, 1.0)
-    closest = a[None, :, :] + t[..., None] * ab[None, :, :]
-    return np.linalg.norm(points[:, None, :] - closest, axis=2)
 
 
 def side_parameters(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple:

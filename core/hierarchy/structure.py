@@ -11,6 +11,7 @@ is subdivided with the split points (anchoring), so leaves conform. Sides of dif
 the same two endpoints are twins: splitting one splits the others at the same 3-D point.
 """
 
+import functools
 import math
 
 import numpy as np
@@ -390,14 +391,19 @@ class HierarchyCore:
         else:
             kept_segments = segments
 
+        # the side chains known not to have changed since they were walked
+        chains = [None] * k
         if step is not None:
             radius = self.grid.skip_radius * step
             feature_xy = features[feature_vertex != -1]
             for s in range(k):
-                chain, _ = self._chain(hedges[s], forward[s])
-                away = np.concatenate([self._xy.buf[chain], feature_xy])
-                for tg in side_grid_parameters(side_a[s], side_b[s], step, away, radius, eps):
-                    self._side_vertex(hedges[s], forward[s], float(tg), eps, GRID)
+                chain, leaves = self._chain(hedges[s], forward[s])
+                away = np.concatenate([self._xy.buf[chain], feature_xy]) if len(feature_xy) else self._xy.buf[chain]
+                grid_t = side_grid_parameters(side_a[s], side_b[s], step, away, radius, eps)
+                for tg in grid_t.tolist():
+                    self._side_vertex(hedges[s], forward[s], tg, eps, GRID)
+                if len(grid_t) == 0:
+                    chains[s] = chain, leaves
             grid_xy = interior_grid_points(corner_xy, step, feature_xy, kept_segments, radius, eps)
             if len(grid_xy):
                 interior_xy = np.concatenate([interior_xy, grid_xy])
@@ -405,7 +411,7 @@ class HierarchyCore:
 
         ring, ring_hedges = [], []
         for s in range(k):
-            chain, leaves = self._chain(hedges[s], forward[s])
+            chain, leaves = chains[s] or self._chain(hedges[s], forward[s])
             ring.extend(chain)
             ring_hedges.extend(leaves)
         n_ring = len(ring)
@@ -432,25 +438,28 @@ class HierarchyCore:
         origin = corner_xy[0]
         unit = eps / _CDT_UNITS_PER_TOLERANCE
         if needle:
-            out_xy = None
+            cdt = None
+            made = len(cdt_xy)
             triangles = np.array([[0, i, i + 1] for i in range(1, n_ring - 1)], dtype=np.int64)
         else:
-            out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
-            if len(out_xy) > len(cdt_xy) and len(seg_local) < 2:
+            triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
+            if cdt.vertices_count() > len(cdt_xy) and len(seg_local) < 2:
                 # A point made where no two inner segments cross: a segment ending a rounding error beyond the
                 # element's outline crossed it. The element is triangulated without its segments (the mesh does
                 # not follow them here; their ends stay vertices), which the statistics count.
                 self.dropped_segments += len(seg_local)
                 seg_local = seg_local[:0]
-                out_xy, triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
+                triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
+            made = cdt.vertices_count()
         crossing_ids = _NO_IDS
         # where the triangulation's points go: a crossing that lands on a point already there is that point
-        local = np.arange(len(cdt_xy) if out_xy is None else len(out_xy))
-        if out_xy is not None and len(out_xy) > len(cdt_xy):
+        local = np.arange(made)
+        if made > len(cdt_xy):
+            out_xy = cdt.vertices_array()
             estimates = np.stack([out_xy["x"][len(cdt_xy) :], out_xy["y"][len(cdt_xy) :]], axis=1) * unit + origin
             crossings = _exact_crossings(estimates, cdt_xy[seg_local], snap)
             local[len(cdt_xy) :] = _same_points(cdt_xy, crossings, snap)
-            fresh = np.flatnonzero(local[len(cdt_xy) :] == np.arange(len(cdt_xy), len(out_xy)))
+            fresh = np.flatnonzero(local[len(cdt_xy) :] == np.arange(len(cdt_xy), made))
             crossing_ids = np.full(len(crossings), -1, dtype=np.int64)
             crossing_ids[fresh] = self._new_vertices(polygon, crossings[fresh], SEGMENT, True)
             triangles = local[triangles]
@@ -679,23 +688,30 @@ def _merge_close(points: np.ndarray, eps: float) -> tuple:
 
 def _triangulate(xy: np.ndarray, origin: np.ndarray, unit: float, n_ring: int, segments: np.ndarray) -> tuple:
     """Constrained Delaunay triangulation of points xy (N, 2) whose first n_ring make the outline, with inner
-    segments (S, 2) local indices: (points (M >= N) structured x/y, triangles (T, 3) int64, the triangulation).
-    The triangulation sees integer coordinates in units of the length tolerance: its in-circle ties (regular
-    grids are full of cocircular points) then break identically at every scene scale."""
+    segments (S, 2) local indices: (triangles (T, 3) int64, the triangulation, whose vertices are xy then the
+    crossings it made). The triangulation sees integer coordinates in units of the length tolerance: its
+    in-circle ties (regular grids are full of cocircular points) then break identically at every scene scale."""
     cdt = pythoncdt.Triangulation(
         pythoncdt.VertexInsertionOrder.AS_PROVIDED,
         pythoncdt.IntersectingConstraintEdges.TRY_RESOLVE,
         0.0,
     )
-    cdt.insert_vertices(np.ascontiguousarray(np.round((xy - origin) / unit)))
-    edges = np.empty((n_ring + len(segments), 2), dtype=np.uint32)
-    edges[:n_ring, 0] = np.arange(n_ring)
-    edges[:n_ring, 1] = np.arange(n_ring) + 1
-    edges[n_ring - 1, 1] = 0
-    edges[n_ring:] = segments
+    cdt.insert_vertices(np.round((xy - origin) / unit))
+    edges = _ring_edges(n_ring)
+    if len(segments):
+        edges = np.concatenate([edges, segments.astype(np.uint32)])
     cdt.insert_edges(edges)
     cdt.erase_outer_triangles()
-    return cdt.vertices_array(), cdt.triangles_array()["vertices"].astype(np.int64), cdt
+    return cdt.triangles_array()["vertices"].astype(np.int64), cdt
+
+
+@functools.cache
+def _ring_edges(n_ring: int) -> np.ndarray:
+    """(n_ring, 2) uint32 the sides of a ring of n_ring points, read-only (shared by every call)."""
+    ring = np.arange(n_ring, dtype=np.uint32)
+    edges = np.stack([ring, (ring + 1) % n_ring], axis=1)
+    edges.flags.writeable = False
+    return edges
 
 
 def _exact_crossings(estimates: np.ndarray, segments: np.ndarray, snap: float) -> np.ndarray:

@@ -351,3 +351,36 @@ def _angle(at, x, y):
     """Angle x at y, in degrees, of 2-D points (2,)."""
     u, w = x - at, y - at
     return math.degrees(math.atan2(abs(u[0] * w[1] - u[1] * w[0]), u[0] * w[0] + u[1] * w[1]))
+
+
+def lattice_points_inside(corners, step, keep_points, keep_segments, radius, slack):
+    """The interior grid of core.hierarchy.grid by its definition, one candidate at a time: the triangular
+    lattice of spacing dx = L / round(L / step) along the longest side L (rows dx sqrt(3) / 2 apart, odd rows
+    shifted by dx / 2, row 0 on that side), kept when more than dx / 2 from every side and more than radius
+    from every keep point and segment (thresholds lowered by slack). Returns a list of (x, y)."""
+    k = len(corners)
+    lengths = [math.dist(corners[i], corners[(i + 1) % k]) for i in range(k)]
+    longest = next(i for i in range(k) if lengths[i] >= max(lengths) - slack)
+    dx = lengths[longest] / max(1, math.floor((lengths[longest] + slack) / step + 0.5))
+    origin = corners[longest]
+    axis = [(corners[(longest + 1) % k][c] - origin[c]) / lengths[longest] for c in range(2)]
+    normal = [-axis[1], axis[0]]
+    reach = max(math.dist(origin, p) for p in corners)
+    kept = []
+    for row in range(1, int(reach / (dx * math.sqrt(3) / 2)) + 2):
+        for column in range(-int(reach / dx) - 2, int(reach / dx) + 3):
+            x = column * dx + (row % 2) * dx / 2
+            y = row * dx * math.sqrt(3) / 2
+            p = [origin[c] + x * axis[c] + y * normal[c] for c in range(2)]
+            side_distances = []
+            for i in range(k):
+                a, b = corners[i], corners[(i + 1) % k]
+                side_distances.append(((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])) / lengths[i])
+            if min(side_distances) <= dx / 2 - slack:
+                continue
+            near = [math.dist(p, q) for q in keep_points]
+            near += [distance_to_segment(p, list(s[0]), list(s[1])) for s in keep_segments]
+            if near and min(near) <= radius - slack:
+                continue
+            kept.append(p)
+    return kept

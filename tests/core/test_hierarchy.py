@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from core.hierarchy import ANGLE_BINS, GridSettings, Hierarchy, ShapeSettings
+from core.hierarchy.geometry import clip_segment_to_polygon
+from core.hierarchy.grid import interior_grid_points, side_grid_parameters
 from core.tolerance import Tolerance
 from tests.core.naive_hierarchy import (
     barycentric_3d,
@@ -13,6 +15,7 @@ from tests.core.naive_hierarchy import (
     constrained_delaunay_violations,
     edges_on_segments,
     forced_angle,
+    lattice_points_inside,
     near_segments,
     piecewise_linear,
     plane_coordinates,
@@ -592,3 +595,53 @@ def test_segments_through_and_ending_at_a_vertex_conform():
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason="leaves around a needle element do not conform")
 def test_segments_through_and_ending_at_a_vertex_needle_defect():
     _through_and_ending(_NEEDLE_DEFECT)
+
+
+def test_grid_kernels_match_their_definitions():
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        corners = rng.uniform(-3.0, 3.0, size=(3, 2))
+        if cross2_of(corners) < 0.0:
+            corners = corners[::-1]
+        if cross2_of(corners) < 0.5:
+            continue
+        step = rng.uniform(0.2, 1.5)
+        keep_points = rng.uniform(-3.0, 3.0, size=(rng.integers(0, 4), 2))
+        keep_segments = rng.uniform(-3.0, 3.0, size=(rng.integers(0, 3), 2, 2))
+        radius = 0.5 * step
+        got = interior_grid_points(corners, step, keep_points, keep_segments, radius, 1e-9)
+        expected = np.array(lattice_points_inside(corners.tolist(), step, keep_points.tolist(),
+                                                  keep_segments.tolist(), radius, 1e-9)).reshape(-1, 2)  # fmt: skip
+        assert len(got) == len(expected), trial
+        assert np.allclose(np.sort(got, axis=0), np.sort(expected, axis=0), atol=1e-12), trial
+        a, b = corners[0], corners[1]
+        t = side_grid_parameters(a, b, step, keep_points, radius, 1e-9)
+        count = int(np.floor(np.linalg.norm(b - a) / step + 0.5))
+        expected_t = [i / count for i in range(1, count)
+                      if all(np.linalg.norm(a + i / count * (b - a) - q) > radius for q in keep_points)]  # fmt: skip
+        assert np.allclose(t, expected_t, atol=1e-15), trial
+
+
+def cross2_of(corners):
+    return float(np.cross(corners[1] - corners[0], corners[2] - corners[0]))
+
+
+def test_segment_clipping_matches_shapely():
+    shapely = pytest.importorskip("shapely")
+    rng = np.random.default_rng(6)
+    polygons = []
+    for _ in range(300):
+        corners = rng.uniform(-1.0, 1.0, size=(3, 2))
+        polygons.append(corners if cross2_of(corners) > 0 else corners[::-1])
+    polygons = np.array(polygons)
+    for _ in range(20):
+        p, q = rng.uniform(-1.5, 1.5, size=(2, 2))
+        t_in, t_out = clip_segment_to_polygon(polygons, p, q)
+        length = np.linalg.norm(q - p)
+        for corners, lo, hi in zip(polygons, t_in, t_out, strict=True):
+            piece = shapely.LineString([p, q]).intersection(shapely.Polygon(corners))
+            assert max(hi - lo, 0.0) * length == pytest.approx(piece.length, abs=1e-12)
+            if piece.length > 1e-9:
+                ends = np.array(piece.coords)
+                ts = np.sort((ends - p) @ (q - p) / length**2)
+                assert np.allclose(ts, [lo, hi], atol=1e-12)
