@@ -442,7 +442,8 @@ class HierarchyCore:
             made = len(cdt_xy)
             triangles = np.array([[0, i, i + 1] for i in range(1, n_ring - 1)], dtype=np.int64)
         else:
-            triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, seg_local)
+            pieces = _split_at_points(cdt_xy, seg_local, snap)
+            triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, pieces)
             if cdt.vertices_count() > len(cdt_xy) and len(seg_local) < 2:
                 # A point made where no two inner segments cross: a segment ending a rounding error beyond the
                 # element's outline crossed it. The element is triangulated without its segments (the mesh does
@@ -712,6 +713,27 @@ def _ring_edges(n_ring: int) -> np.ndarray:
     edges = np.stack([ring, (ring + 1) % n_ring], axis=1)
     edges.flags.writeable = False
     return edges
+
+
+def _split_at_points(xy: np.ndarray, segments: np.ndarray, snap: float) -> np.ndarray:
+    """Inner segments (S, 2) (local indices into points xy (N, 2)) cut at every point within snap of their
+    interior: (S', 2) int64 pieces. The triangulation sees such a point a rounding error beside the segment and
+    would join it to the segment's ends by a flat triangle (a needle), leaving the leaves around unmatched."""
+    if len(segments) == 0:
+        return segments
+    pieces = []
+    for u, v in segments.tolist():
+        a = xy[u]
+        d = xy[v] - a
+        length = float(np.hypot(d[0], d[1]))
+        offset = xy - a
+        along = offset @ d / length
+        on = (np.abs(cross2(d, offset)) / length <= snap) & (along > snap) & (along < length - snap)
+        on[[u, v]] = False
+        inner = np.flatnonzero(on)
+        chain = [u, *inner[np.argsort(along[inner])].tolist(), v]
+        pieces.extend(zip(chain[:-1], chain[1:], strict=False))
+    return np.array(pieces, dtype=np.int64)
 
 
 def _exact_crossings(estimates: np.ndarray, segments: np.ndarray, snap: float) -> np.ndarray:
