@@ -77,6 +77,37 @@ def exact_form_factors(scene: Scene, points, normals, source: int, blockers=None
     return _form_factors(pts, nrm, source, allowed, *arrays, *tree.arrays, scene.tol.length)
 
 
+def exact_cut_form_factors(scene: Scene, points, normals, source: int, subdivision, variation, limits, bvh=None):
+    """Exact occluded form factors from points to the elements of a subdivision of polygon `source`, each point
+    descending as deep as its limit asks (source refinement, seed 000 section 5.3).
+
+    points, normals: (N, 3) as for exact_form_factors; subdivision: (triangles (E, 3, 3) float64 elements lying in
+    the source's plane, first_child (E,) int64, child_count (E,) int64, roots (R,) int64: the elements that
+    partition the source); variation (E,) float64 >= 0 and limits (N,) float64: an element is replaced by its
+    children at a point while its form factor times its variation exceeds the point's limit. The form factor
+    to an element is that of the part of the view inside it, so the elements of a point's cut add up to its
+    form factor to the source. Returns (point (L,) int64, element (L,) int64, form_factor (L,) float64): the
+    cut of every point, elements it cannot see left out.
+    """
+    pts, nrm = _check_points(points, normals)
+    _check_source(scene, source)
+    triangles, first_child, child_count, roots = (np.ascontiguousarray(a) for a in subdivision)
+    if triangles.ndim != 3 or triangles.shape[1:] != (3, 3):
+        raise ValueError(f"subdivision triangles must be (E, 3, 3), got {triangles.shape}")
+    variation = np.asarray(variation, dtype=np.float64)
+    limits = np.asarray(limits, dtype=np.float64).reshape(-1)
+    if len(variation) != len(triangles) or len(limits) != len(pts):
+        raise ValueError(f"variation ({len(variation)}) and limits ({len(limits)}) must match the elements "
+                         f"({len(triangles)}) and the points ({len(pts)})")  # fmt: skip
+    allowed = _allowed_mask(scene, None)
+    tree = bvh if bvh is not None else scene_bvh(scene)
+    arrays = _scene_arrays(scene, allowed, source)
+    return _cut_form_factors(
+        pts, nrm, source, allowed, *arrays, *tree.arrays, scene.tol.length, triangles.astype(np.float64),
+        first_child.astype(np.int64), child_count.astype(np.int64), roots.astype(np.int64), variation, limits,
+    )  # fmt: skip
+
+
 def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None) -> View:
     """The exact view of polygon `source` from one point: visible pieces, labelled boundary, form factor.
 
@@ -226,6 +257,100 @@ def _form_factors(
         )
         result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
     return result
+
+
+@njit(cache=True)
+def _cut_form_factors(
+    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+    triangles, first_child, child_count, roots, variation, limits,
+):
+    out_point = np.empty(64, dtype=np.int64)
+    out_element = np.empty(64, dtype=np.int64)
+    out_ff = np.empty(64)
+    found = 0
+    window = np.empty((3, 2))
+    stack = np.empty(len(triangles) + len(roots), dtype=np.int64)
+    for i in range(len(points)):
+        pieces_xy, _, frame = _point_view(
+            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+        )
+        if len(pieces_xy) == 0:
+            continue
+        depth = 0
+        for r in roots:
+            stack[depth] = r
+            depth += 1
+        while depth > 0:
+            depth -= 1
+            element = stack[depth]
+            for j in range(3):
+                _to_frame(triangles[element, j] - frame[0], frame[1], frame[2], frame[3, 0], window[j])
+            ff = _window_form_factor(points[i], normals[i], pieces_xy, frame, window)
+            if ff <= 0.0:
+                continue
+            if child_count[element] > 0 and ff * variation[element] > limits[i]:
+                for c in range(first_child[element], first_child[element] + child_count[element]):
+                    stack[depth] = c
+                    depth += 1
+                continue
+            if found == len(out_ff):
+                out_point = np.concatenate((out_point, np.empty(found, dtype=np.int64)))
+                out_element = np.concatenate((out_element, np.empty(found, dtype=np.int64)))
+                out_ff = np.concatenate((out_ff, np.empty(found)))
+            out_point[found] = i
+            out_element[found] = element
+            out_ff[found] = ff
+            found += 1
+    return out_point[:found], out_element[:found], out_ff[:found]
+
+
+@njit(cache=True)
+def _window_form_factor(point, normal, pieces_xy, frame, window):
+    """Form factor of the part of the visible pieces (convex, 2-D frame) inside the triangle window (3, 2)."""
+    area = (window[1, 0] - window[0, 0]) * (window[2, 1] - window[0, 1]) - (window[1, 1] - window[0, 1]) * (
+        window[2, 0] - window[0, 0]
+    )
+    if area == 0.0:
+        return 0.0
+    clipped = List()
+    for xy in pieces_xy:
+        piece = xy
+        for j in range(3):
+            a = window[j] if area > 0.0 else window[2 - j]
+            b = window[(j + 1) % 3] if area > 0.0 else window[(4 - j) % 3]
+            piece = _clip_half_plane(piece, a[0], a[1], b[0], b[1])
+            if len(piece) < 3:
+                break
+        if len(piece) >= 3:
+            clipped.append(piece)
+    if len(clipped) == 0:
+        return 0.0
+    return _pieces_form_factor(point, normal, clipped, frame)
+
+
+@njit(cache=True)
+def _clip_half_plane(xy, ax, ay, bx, by):
+    """The part of convex polygon xy (K, 2) left of the directed line a -> b (Sutherland-Hodgman, one plane)."""
+    k = len(xy)
+    out = np.empty((k + 1, 2))
+    count = 0
+    for j in range(k):
+        px, py = xy[j, 0], xy[j, 1]
+        qx, qy = xy[(j + 1) % k, 0], xy[(j + 1) % k, 1]
+        hp = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+        hq = (bx - ax) * (qy - ay) - (by - ay) * (qx - ax)
+        if hp >= 0.0:
+            out[count, 0] = px
+            out[count, 1] = py
+            count += 1
+        if (hp > 0.0 and hq < 0.0) or (hp < 0.0 and hq > 0.0):
+            t = hp / (hp - hq)
+            out[count, 0] = px + t * (qx - px)
+            out[count, 1] = py + t * (qy - py)
+            count += 1
+    return out[:count]
 
 
 @njit(cache=True)

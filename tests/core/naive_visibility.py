@@ -39,8 +39,9 @@ def _clip_by_plane(polygon, plane_normal, plane_offset):
     return np.array(kept).reshape(-1, 3)
 
 
-def oracle_form_factor(point, normal, source, blockers):
-    """Exact form factor from (point, normal) to the convex polygon `source` (K, 3) behind `blockers`."""
+def oracle_form_factor(point, normal, source, blockers, within=None):
+    """Exact form factor from (point, normal) to the convex polygon `source` (K, 3) behind `blockers`; with
+    `within` (a (M, 3) polygon in the source's plane), to the part of the source inside it only."""
     point = np.asarray(point, dtype=float)
     normal = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
     source = np.asarray(source, dtype=float)
@@ -88,6 +89,8 @@ def oracle_form_factor(point, normal, source, blockers):
             shadows.append(shadow)
     if shadows:
         region = region.difference(shapely.union_all(shadows))
+    if within is not None:
+        region = region.intersection(Polygon(to_2d(np.asarray(within, dtype=float))).buffer(0))
     rings = []
     parts = getattr(region, "geoms", [region])
     for part in parts:

@@ -4,7 +4,7 @@ import pytest
 from core.errors import SceneError
 from core.formfactor import point_polygon_ff
 from core.scene import Scene
-from core.visibility import HORIZON, exact_form_factors, exact_view
+from core.visibility import HORIZON, exact_cut_form_factors, exact_form_factors, exact_view
 from tests.core.furnished_rooms import box_quads, free_points, furnished_room
 from tests.core.naive_visibility import oracle_form_factor
 
@@ -227,3 +227,84 @@ def test_closed_room_identity_on_benchmark_scenes(name):
     normals = random_normals(rng, len(points))
     total = all_form_factors(scene, points, normals).sum(axis=1)
     np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+
+
+def quad_subdivision(quad, levels):
+    """A tree of triangles over a convex quad (4, 3): two roots (a fan), each split into 4 by its edge midpoints
+    `levels` times. Returns (triangles (E, 3, 3), first_child (E,), child_count (E,), roots (2,))."""
+    triangles = [quad[[0, 1, 2]], quad[[0, 2, 3]]]
+    first_child, child_count = [-1, -1], [0, 0]
+    frontier = [0, 1]
+    for _ in range(levels):
+        below = []
+        for e in frontier:
+            a, b, c = triangles[e]
+            ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+            first_child[e], child_count[e] = len(triangles), 4
+            for child in ([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]):
+                below.append(len(triangles))
+                triangles.append(np.array(child))
+                first_child.append(-1)
+                child_count.append(0)
+        frontier = below
+    return np.array(triangles), np.array(first_child), np.array(child_count), np.array([0, 1])
+
+
+def test_cut_form_factors_match_the_oracle_inside_each_element_and_add_up():
+    scene, boxes, size = room_scene(1)
+    rng = np.random.default_rng(41)
+    points = free_points(boxes, size, 6, rng)
+    normals = random_normals(rng, 6)
+    floor = int(np.argmax(scene.areas))
+    subdivision = quad_subdivision(scene.polygon(floor), 2)
+    triangles = subdivision[0]
+    others = [scene.polygon(j) for j in range(scene.n_polygons) if j != floor]
+    whole = exact_form_factors(scene, points, normals, floor)
+    assert (whole > 0).sum() >= 4
+    # variation 1 and limit 0 everywhere: every point descends to the finest elements it sees
+    point, element, ff = exact_cut_form_factors(
+        scene, points, normals, floor, subdivision, np.ones(len(triangles)), np.zeros(len(points))
+    )
+    assert set(element.tolist()) <= set(range(10, 42))
+    compared = 0
+    for i in range(len(points)):
+        for e in range(10, 42):
+            expected = oracle_form_factor(points[i], normals[i], scene.polygon(floor), others, within=triangles[e])
+            got = ff[(point == i) & (element == e)].sum()
+            assert abs(got - expected) <= 1e-9 * max(expected, 1e-3), (i, e, got, expected)
+            compared += expected > 0
+    assert compared > 40
+    np.testing.assert_allclose(np.bincount(point, ff, len(points)), whole, rtol=0, atol=1e-12)
+
+
+def test_cut_form_factors_descend_only_where_the_limit_asks():
+    scene, boxes, size = room_scene(2)
+    rng = np.random.default_rng(42)
+    points = free_points(boxes, size, 8, rng)
+    normals = random_normals(rng, 8)
+    floor = int(np.argmax(scene.areas))
+    subdivision = quad_subdivision(scene.polygon(floor), 2)
+    count = len(subdivision[0])
+    variation = rng.uniform(0.0, 1.0, count)
+    limits = rng.uniform(0.0, 0.05, len(points))
+    point, element, ff = exact_cut_form_factors(scene, points, normals, floor, subdivision, variation, limits)
+    finest = np.zeros(len(points), dtype=np.int64)
+    for i in range(len(points)):
+        # the reference: the whole finest level, then each element kept where its own rule stops
+        for e in element[point == i].tolist():
+            fine = oracle_form_factor(points[i], normals[i], scene.polygon(floor),
+                                      [scene.polygon(j) for j in range(scene.n_polygons) if j != floor],
+                                      within=subdivision[0][e])  # fmt: skip
+            stops = subdivision[2][e] == 0 or fine * variation[e] <= limits[i]
+            assert stops, (i, e)
+            parent = next((p for p in range(count) if subdivision[2][p] and subdivision[1][p] <= e
+                           < subdivision[1][p] + subdivision[2][p]), None)  # fmt: skip
+            if parent is not None:
+                above = oracle_form_factor(points[i], normals[i], scene.polygon(floor),
+                                           [scene.polygon(j) for j in range(scene.n_polygons) if j != floor],
+                                           within=subdivision[0][parent])  # fmt: skip
+                assert above * variation[parent] > limits[i], (i, e, parent)
+            finest[i] += subdivision[2][e] == 0
+    assert finest.sum() > 0 and (np.bincount(point, minlength=len(points)) < 32).any()
+    np.testing.assert_allclose(np.bincount(point, ff, len(points)),
+                               exact_form_factors(scene, points, normals, floor), rtol=0, atol=1e-12)  # fmt: skip
