@@ -1,7 +1,8 @@
 """Node enumeration of the Visibility Skeleton: the candidate extremal stabbing lines that validation casts.
 
-Durand, Drettakis & Puech 1997 (seed 003), sections 3.2.1-3.2.2 and 5. Every node is a line through a set
-of generators (VV: two vertices; VEE / EVE: a vertex and two edges; E4: four edges) on which the part
+Durand, Drettakis & Puech 1997 (seed 003), sections 3.2.1-3.2.3 and 5. Every node is a line through a set
+of generators (VV: two vertices; VEE / EVE: a vertex and two edges; E4: four edges; FEE / EFE: a face's
+plane and two edges crossing it, the face's two crossed edges standing for the face) on which the part
 between the outer generators is free. This module proposes such lines; `core.skeleton.validation` casts
 each through the scene and keeps the nodes. It must propose every line validation would accept (a lost
 candidate is a lost node) and as few others as it can, since validation costs a ray cast per candidate.
@@ -31,7 +32,9 @@ floor corner), so a VV pair is never culled by the faces at its vertices, only b
 Candidates: VV pairs of masked vertices; VEE lines through a masked vertex meeting two masked edges not
 incident to it (and not sharing a vertex: such a line passes through the shared vertex, where validation
 finds no edge contact); E4 transversals of four masked edges with pairwise distinct vertices, the roots of a
-quadratic (section 3.2.2 finds them by a binary search; the closed form is exact). Edges with one face
+quadratic (section 3.2.2 finds them by a binary search; the closed form is exact); FEE lines in the plane of
+a polygon through the crossings of two masked edges with it, crossing the polygon through two masked edges
+(section 3.2.3; pruned by local visibility only: a face's plane holds few crossings). Edges with one face
 (boundaries) and vertices of open surfaces are handled by the same tests.
 
 Every threshold comes from scene.tol: lengths are multiples of tol.length (`tol.snap` is the occlusion
@@ -48,7 +51,7 @@ from numba import njit
 from ..errors import CancelledError, SceneError
 from ..raycast import CONTACT_VERTEX, _arcs_cover_circle, _contact_arc, _perpendicular_frame
 from ..scene import Scene
-from .candidates import CANDIDATE_E4, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
+from .candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 from .topology import scene_topology
 
 DEFAULT_CHUNK = 100_000
@@ -67,6 +70,7 @@ _CLIP = 40
 
 _VERTEX_BATCH = 48
 _EDGE_BATCH = 24
+_FACE_BATCH = 32
 
 Cancel = Callable[[], bool]
 
@@ -91,7 +95,7 @@ def iter_candidates(
     cancel: a callable checked between chunks; CancelledError is raised when it returns True.
 
     Chunks are never empty; fractions increase strictly and the last one is 1.0. Each candidate appears
-    once: VV with vertices (v, w), v < w; VEE with edges sorted; E4 with its four edges sorted.
+    once: VV with vertices (v, w), v < w; VEE with edges sorted; E4 and FEE with their four edges sorted.
     """
     vmask, emask, polygons, chunk = _check_arguments(scene, vertex_mask, edge_mask, sources, chunk)
     if cancel is not None and not callable(cancel):
@@ -107,7 +111,7 @@ def iter_candidates(
     )
     bins = np.clip(np.ceil(lengths / (BIN_FRACTION * scene.diagonal)), 1, MAX_BINS).astype(np.int64)
 
-    # work units, for the fraction: a vertex map, its VV and VEE lines, an edge bin's E4 lines
+    # work units, for the fraction: a vertex map, its VV and VEE lines, an edge bin's E4 lines, a face's lines
     steps = []
     for lo in range(0, len(vertex_ids), _VERTEX_BATCH):
         steps.append(("map", lo, min(lo + _VERTEX_BATCH, len(vertex_ids)), 1.0))
@@ -116,6 +120,9 @@ def iter_candidates(
     for lo in range(0, len(edge_ids), _EDGE_BATCH):
         hi = min(lo + _EDGE_BATCH, len(edge_ids))
         steps.append(("edge", lo, hi, 2.0 * float(bins[lo:hi].sum()) / max(1, hi - lo)))
+    polygon_ids = np.arange(scene.n_polygons, dtype=np.int64) if len(edge_ids) else np.empty(0, dtype=np.int64)
+    for lo in range(0, len(polygon_ids), _FACE_BATCH):
+        steps.append(("face", lo, min(lo + _FACE_BATCH, len(polygon_ids)), 1.0))
     weights = np.array([(s[2] - s[1]) * s[3] for s in steps], dtype=np.float64)
     total = float(weights.sum()) if len(weights) else 1.0
 
@@ -146,6 +153,12 @@ def iter_candidates(
                 g.plane_offsets, g.edge_out, g.vf_off, g.vf_face, g.vf_corner, g.ve_off, g.ve_edge, g.ef_off,
                 g.ef_face, g.ef_inward, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.grid, CELLS,
                 vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+            )  # fmt: skip
+        elif phase == "face":
+            found = _face_candidates(
+                polygon_ids, lo, hi, emask, g.vertices, g.edges, g.points, g.offsets, g.normals, g.plane_offsets,
+                g.edge_out, g.corner_edge, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.vf_off,
+                g.vf_face, g.ef_off, g.ef_face, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
             )  # fmt: skip
         else:
             found = _edge_candidates(
@@ -241,6 +254,7 @@ class _Geometry:
         self.ve_off = topology.vertex_edge_offsets
         self.ve_edge = topology.vertex_edges
         self.ef_off = scene.edge_face_offsets
+        self.corner_edge = scene.polygon_edge_ids
         self.ef_face = scene.edge_faces
         # inward direction of face f across edge e: normal x (edge direction as f runs along it)
         local = topology.edge_face_local
@@ -1683,6 +1697,153 @@ def _edge_candidates(
                             out = _push(out, count, CANDIDATE_E4, -1, -1, four[0], four[1], four[2], four[3], start, d)
                             count += 1
     return _trim(out, count)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# FEE / EFE: lines in a face's plane through the crossings of two edges (section 3.2.3)
+
+
+@njit(cache=True)
+def _face_candidates(
+    polygon_ids, lo, hi, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, corner_edge,
+    vertex_object, edge_object, object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face,
+    lazy, src, margin, delta, tol, angle_tol,
+):  # fmt: skip
+    """Lines lying in the plane of polygons polygon_ids[lo:hi] through the points where two masked edges cross
+    that plane, kept when they cross the polygon (entering and leaving it through two masked edges, not at a
+    corner). Seed 003 section 3.2.3 and Fig. 10: intersect each face's plane with every edge, join pairs of
+    crossings. Such a line is where an EEE swath whose lines graze an edge of the face turns into the face's
+    plane: beyond it they would cut the face, and the swath through the face's other crossed edge takes over.
+
+    Pruned (safe, see `_enters_object`): a crossing edge whose convex object the line enters on the side of
+    the other generators. Returns candidates (kind CANDIDATE_FEE, the four edges sorted)."""
+    out = _new_output(64)
+    count = 0
+    n_edges = edges.shape[0]
+    crossing = np.empty(n_edges, dtype=np.int64)
+    at = np.empty((n_edges, 3))
+    others = np.empty((3, 3))
+    u = np.empty(3)
+    four = np.empty(4, dtype=np.int64)
+    for index in range(lo, hi):
+        f = polygon_ids[index]
+        normal = normals[f]
+        first = offsets[f]
+        corners = offsets[f + 1] - first
+        k = 0
+        for e in range(n_edges):
+            if not emask[e]:
+                continue
+            a = vertices[edges[e, 0]]
+            b = vertices[edges[e, 1]]
+            ha = _dot(normal, a) + plane_offsets[f]
+            hb = _dot(normal, b) + plane_offsets[f]
+            # strictly across: an edge ending in the plane meets it at a vertex (VEE / VV lines)
+            if ha * hb >= 0.0 or abs(ha) <= tol or abs(hb) <= tol:
+                continue
+            crossing[k] = e
+            w = ha / (ha - hb)
+            for c in range(3):
+                at[k, c] = a[c] + w * (b[c] - a[c])
+            k += 1
+        for i in range(k):
+            p = at[i]
+            for j in range(i + 1, k):
+                d = at[j] - p
+                length = _norm(d)
+                if length <= tol:
+                    continue
+                d = d / length
+                # the line p + t d (in the plane) crosses the polygon over [t_in, t_out]
+                t_in = -np.inf
+                t_out = np.inf
+                e_in = -1
+                e_out = -1
+                outside = False
+                for c in range(first, first + corners):
+                    offset = _dot(p - points[c], edge_out[c])
+                    rate = _dot(d, edge_out[c])
+                    if abs(rate) <= angle_tol:
+                        if offset > -tol:
+                            outside = True
+                            break
+                        continue
+                    t = -offset / rate
+                    if rate > 0.0:
+                        if t < t_out:
+                            t_out = t
+                            e_out = corner_edge[c]
+                    elif t > t_in:
+                        t_in = t
+                        e_in = corner_edge[c]
+                if outside or t_out - t_in <= tol or e_in == e_out or not emask[e_in] or not emask[e_out]:
+                    continue
+                # through a corner of the polygon: the line meets a vertex there (a VEE line)
+                corner = False
+                for c in range(first, first + corners):
+                    if _norm(_cross(points[c] - p, d)) <= tol:
+                        corner = True
+                        break
+                if corner:
+                    continue
+                ei = crossing[i]
+                ej = crossing[j]
+                # two edges of one face: the line is where the two faces' planes meet (an FF node), whose
+                # swaths all keep two edges of one face (FE pencils, not stored)
+                if _shared_polygon(ef_off, ef_face, ei, ej):
+                    continue
+                # local visibility at the two crossings: the line must not dive into an edge's object on the
+                # side where the other generators are
+                for c in range(3):
+                    others[0, c] = p[c] + length * d[c]
+                    others[1, c] = p[c] + t_in * d[c]
+                    others[2, c] = p[c] + t_out * d[c]
+                    u[c] = d[c]
+                if _enters_object(False, ei, u, others, 3, vertex_object, edge_object, object_offsets,
+                                  object_polygons, vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin,
+                                  delta):  # fmt: skip
+                    continue
+                if t_in < 0.0:
+                    for c in range(3):
+                        u[c] = -d[c]
+                    if _enters_object(False, ei, u, others, 3, vertex_object, edge_object, object_offsets,
+                                      object_polygons, vf_off, vf_face, ef_off, ef_face, normals, plane_offsets,
+                                      margin, delta):  # fmt: skip
+                        continue
+                for c in range(3):
+                    others[0, c] = p[c]
+                    u[c] = -d[c]
+                if _enters_object(False, ej, u, others, 3, vertex_object, edge_object, object_offsets,
+                                  object_polygons, vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin,
+                                  delta):  # fmt: skip
+                    continue
+                if t_out > length:
+                    for c in range(3):
+                        u[c] = d[c]
+                    if _enters_object(False, ej, u, others, 3, vertex_object, edge_object, object_offsets,
+                                      object_polygons, vf_off, vf_face, ef_off, ef_face, normals, plane_offsets,
+                                      margin, delta):  # fmt: skip
+                        continue
+                if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
+                                            angle_tol):  # fmt: skip
+                    continue
+                four[0] = ei
+                four[1] = ej
+                four[2] = e_in
+                four[3] = e_out
+                four.sort()
+                out = _push(out, count, CANDIDATE_FEE, -1, -1, four[0], four[1], four[2], four[3], p, d)
+                count += 1
+    return _trim(out, count)
+
+
+@njit(cache=True)
+def _shared_polygon(ef_off, ef_face, e, f):
+    for i in range(ef_off[e], ef_off[e + 1]):
+        for k in range(ef_off[f], ef_off[f + 1]):
+            if ef_face[i] == ef_face[k]:
+                return True
+    return False
 
 
 @njit(cache=True)

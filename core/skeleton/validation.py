@@ -46,7 +46,13 @@ NODE_VV = 0
 NODE_VEE = 1
 NODE_EVE = 2
 NODE_E4 = 3
-NODE_NAMES = {NODE_VV: "VV", NODE_VEE: "VEE", NODE_EVE: "EVE", NODE_E4: "E4"}
+NODE_FEE = 4
+NODE_EFE = 5
+NODE_NAMES = {NODE_VV: "VV", NODE_VEE: "VEE", NODE_EVE: "EVE", NODE_E4: "E4", NODE_FEE: "FEE", NODE_EFE: "EFE"}
+"""FEE / EFE (seed 003, appendix 7.1): a line in a face's plane crossing the face, through two other edges; its
+generators are those two edges and the two edges of the face it crosses, the face beyond both other edges
+(FEE) or between them (EFE). Its arcs are the EEE swaths grazing either crossed edge of the face (relaxing the
+other one); the swaths keeping both are the face's FE pencils, not stored (see _coplanar_swath)."""
 
 ARC_EV = 0
 ARC_EEE = 1
@@ -319,10 +325,27 @@ def _parallel_edges(vertices, edges, e, f, tol):
 
 
 @njit(cache=True)
-def _coplanar_swath(vertices, edges, r_kind, r_id, n, tol):
-    """Whether an EEE arc's three edges share a plane or two of them are parallel: the degenerate edge triples
-    the paper rejects (1999, section 2.2); they are not visual events."""
+def _shared_face(ef_off, ef_face, e, f):
+    """Whether edges e and f bound one polygon."""
+    for i in range(ef_off[e], ef_off[e + 1]):
+        for k in range(ef_off[f], ef_off[f + 1]):
+            if ef_face[i] == ef_face[k]:
+                return True
+    return False
+
+
+@njit(cache=True)
+def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
+    """Whether an EEE arc's three edges share a plane, two of them are parallel or two bound one face: the
+    degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events."""
     if n == 3 and r_kind[0] == GEN_EDGE and r_kind[1] == GEN_EDGE and r_kind[2] == GEN_EDGE:
+        # two edges of one face: a line meeting both inside them lies in the face's plane (or passes through
+        # their common vertex), so the family is the face's pencil through the third edge's crossing point, an
+        # FE swath of seed 003's appendix, not an EEE swath (met at face nodes, see _validate_chunk)
+        for j in range(3):
+            for k in range(j + 1, 3):
+                if _shared_face(ef_off, ef_face, r_id[j], r_id[k]):
+                    return True
         # two parallel edges: every line meeting both lies in their plane, a pencil through the third edge's
         # crossing point, which the simplest-configuration rule leaves out (no EEE visual event there)
         for j in range(3):
@@ -391,7 +414,7 @@ def _relaxed_arc(
             m[row, 2] = -w2 * tn
             m[row, 3] = w1 * tn
             row += 1
-    if row != 4 or _coplanar_swath(vertices, edges, r_kind, r_id, n_retained, tol):
+    if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n_retained, tol):
         return False, 0, 0, 0, 0.0, 0
     ok, x = _solve4(m, rhs)
     if not ok:
@@ -852,6 +875,10 @@ def _validate_chunk(
             node_kind[node] = NODE_EVE if gk[1] == GEN_VERTEX else NODE_VEE
         else:
             node_kind[node] = NODE_E4
+            for j in range(ng):
+                for k in range(j + 1, ng):
+                    if _shared_face(ef_off, ef_face, gid[j], gid[k]):
+                        node_kind[node] = NODE_EFE if j == 1 and k == 2 else NODE_FEE
         for j in range(ng):
             node_gkind[node, j] = gk[j]
             node_gid[node, j] = gid[j]

@@ -9,7 +9,10 @@ occlusion, no local visibility, no grids), for scenes of a few dozen polygons:
 * E4: every 4-set of generator edges with 8 distinct vertices; the transversals of their four lines are the
   lines of the 2-dimensional null space of the Pluecker incidence system that lie on the Klein quadric (a
   quadratic), kept when they meet all four segments (within tol). This is a different computation from
-  core's (a bilinear elimination on two of the edges), so the two do not share mistakes.
+  core's (a bilinear elimination on two of the edges), so the two do not share mistakes;
+* FEE (section 3.2.3): every polygon, every pair of generator edges crossing its plane and every pair of its
+  own generator edges, the line through the two crossings kept when it crosses both own edges inside them
+  (core clips the line against the polygon instead).
 
 Thresholds come from scene.tol (tol.length for lengths, tol.cosine for relative degeneracy). Plain numpy;
 nothing from core.skeleton but the NodeCandidates record and its kind codes.
@@ -22,7 +25,7 @@ import itertools
 import numpy as np
 
 from core.scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
-from core.skeleton.candidates import CANDIDATE_E4, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
+from core.skeleton.candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 
 
 def room_scene(n_boxes: int = 1, seed: int = 0, closed: bool = True) -> Scene:
@@ -215,11 +218,88 @@ def _transversal_candidates(scene: Scene, quads: np.ndarray, system: np.ndarray,
     return NodeCandidates.concatenate(results)
 
 
+def naive_fee(scene: Scene, edge_mask: np.ndarray) -> NodeCandidates:
+    """For every polygon f, every pair of masked edges crossing f's plane strictly (both ends farther than tol
+    from it, on either side) and bounding no common polygon, and every pair of masked edges of f: the line
+    through the two crossing points,
+    kept when it passes through the inside of both edges of f (farther than tol from their ends)."""
+    tol = scene.tol.length
+    a_all = scene.vertices[scene.edges[:, 0]]
+    b_all = scene.vertices[scene.edges[:, 1]]
+    parts = []
+    for f in range(scene.n_polygons):
+        height_a = a_all @ scene.normals[f] + scene.plane_offsets[f]
+        height_b = b_all @ scene.normals[f] + scene.plane_offsets[f]
+        strict = (np.abs(height_a) > tol) & (np.abs(height_b) > tol)
+        across = np.flatnonzero(edge_mask & strict & (np.sign(height_a) * np.sign(height_b) < 0))
+        own = scene.polygon_edge_ids[scene.polygon_offsets[f] : scene.polygon_offsets[f + 1]]
+        own = own[edge_mask[own]]
+        if len(across) < 2 or len(own) < 2:
+            continue
+        share = (height_a[across] / (height_a[across] - height_b[across]))[:, None]
+        crossing = a_all[across] + share * (b_all[across] - a_all[across])
+        # two edges of one face cross f's plane where the two planes meet (FF lines, not EEE swath ends)
+        pairs = np.array(
+            [(i, j) for i, j in itertools.combinations(range(len(across)), 2)
+             if not _share_face(scene, across[i], across[j])],
+            dtype=np.int64,
+        ).reshape(-1, 2)
+        origin = crossing[pairs[:, 0]]
+        d = crossing[pairs[:, 1]] - origin
+        length = np.linalg.norm(d, axis=1)
+        keep = length > tol
+        pairs, origin, d = pairs[keep], origin[keep], d[keep] / length[keep, None]
+        for g, h in itertools.combinations(own, 2):
+            inside = _meets_inside(scene, origin, d, g) & _meets_inside(scene, origin, d, h)
+            count = int(inside.sum())
+            edges = np.stack(
+                [across[pairs[inside, 0]], across[pairs[inside, 1]], np.full(count, g), np.full(count, h)], axis=1
+            )
+            parts.append(
+                NodeCandidates(
+                    kind=np.full(count, CANDIDATE_FEE, dtype=np.int8),
+                    vertices=np.full((count, 2), -1, dtype=np.int64),
+                    edges=np.sort(edges, axis=1).astype(np.int64),
+                    origin=origin[inside],
+                    direction=d[inside],
+                )
+            )
+    return NodeCandidates.concatenate(parts)
+
+
+def _share_face(scene: Scene, e: int, f: int) -> bool:
+    faces = scene.edge_faces[scene.edge_face_offsets[e] : scene.edge_face_offsets[e + 1]]
+    return bool(np.isin(faces, scene.edge_faces[scene.edge_face_offsets[f] : scene.edge_face_offsets[f + 1]]).any())
+
+
+def _meets_inside(scene: Scene, origins: np.ndarray, directions: np.ndarray, edge: int) -> np.ndarray:
+    """(N,) bool: whether each line, lying in a plane with the segment, crosses it farther than tol from its
+    ends (a 2-D line intersection in that plane)."""
+    tol = scene.tol.length
+    a, b = scene.vertices[scene.edges[edge]]
+    along = b - a
+    length = np.linalg.norm(along)
+    # origin + t d = a + s along: the component across d of (a - origin) + s along vanishes
+    w = a - origins
+    across_w = w - np.einsum("ij,ij->i", w, directions)[:, None] * directions
+    across_e = along - (directions @ along)[:, None] * directions
+    ee = np.einsum("ij,ij->i", across_e, across_e)
+    ok = ee > (scene.tol.cosine * length) ** 2
+    s = -np.einsum("ij,ij->i", across_w, across_e) / np.where(ok, ee, 1.0)
+    return ok & (s * length > tol) & ((1.0 - s) * length > tol)
+
+
 def naive_candidates(scene: Scene, vertex_mask=None, edge_mask=None) -> NodeCandidates:
-    """VV, VEE and E4 candidates of the scene by exhaustive enumeration (masks default to the skeleton's)."""
+    """VV, VEE, E4 and FEE candidates of the scene by exhaustive enumeration (masks default to the
+    skeleton's)."""
     default_v, default_e = generator_masks(scene)
     vertex_mask = default_v if vertex_mask is None else vertex_mask
     edge_mask = default_e if edge_mask is None else edge_mask
     return NodeCandidates.concatenate(
-        [naive_vv(scene, vertex_mask), naive_vee(scene, vertex_mask, edge_mask), naive_e4(scene, edge_mask)]
+        [
+            naive_vv(scene, vertex_mask),
+            naive_vee(scene, vertex_mask, edge_mask),
+            naive_e4(scene, edge_mask),
+            naive_fee(scene, edge_mask),
+        ]
     )

@@ -23,7 +23,7 @@ from bench.scenes import SceneBuilder
 from core.bvh import build_bvh
 from core.errors import CancelledError, SceneError
 from core.scene import Scene
-from core.skeleton.candidates import CANDIDATE_E4, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
+from core.skeleton.candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 from core.skeleton.enumeration import iter_candidates
 from core.skeleton.topology import scene_topology
 from core.skeleton.validation import validate_candidates
@@ -66,7 +66,7 @@ def line_keys(candidates: NodeCandidates) -> Counter:
 
 
 def counts(candidates: NodeCandidates) -> list[int]:
-    return np.bincount(candidates.kind, minlength=3).tolist()
+    return np.bincount(candidates.kind, minlength=4).tolist()
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -122,6 +122,7 @@ def test_fast_enumeration_prunes():
     assert quick[CANDIDATE_VEE] < naive[CANDIDATE_VEE] / 4
     assert quick[CANDIDATE_E4] < naive[CANDIDATE_E4] / 2
     assert quick[CANDIDATE_VV] <= naive[CANDIDATE_VV]
+    assert 0 < quick[CANDIDATE_FEE] <= naive[CANDIDATE_FEE]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -146,8 +147,8 @@ def test_candidates_are_well_formed():
     tol = scene.tol.length
     assert np.allclose(np.linalg.norm(c.direction, axis=1), 1.0)
     assert c.vertices.dtype == np.int64 and c.edges.dtype == np.int64 and c.kind.dtype == np.int8
-    wanted_vertices = {CANDIDATE_VV: 2, CANDIDATE_VEE: 1, CANDIDATE_E4: 0}
-    wanted_edges = {CANDIDATE_VV: 0, CANDIDATE_VEE: 2, CANDIDATE_E4: 4}
+    wanted_vertices = {CANDIDATE_VV: 2, CANDIDATE_VEE: 1, CANDIDATE_E4: 0, CANDIDATE_FEE: 0}
+    wanted_edges = {CANDIDATE_VV: 0, CANDIDATE_VEE: 2, CANDIDATE_E4: 4, CANDIDATE_FEE: 4}
     for i in range(len(c)):
         kind = int(c.kind[i])
         vertices = c.vertices[i][c.vertices[i] >= 0]
@@ -163,6 +164,14 @@ def test_candidates_are_well_formed():
             assert _segment_gap(scene, c.origin[i], c.direction[i], e) <= 4 * tol
         if kind == CANDIDATE_E4:
             assert len(np.unique(scene.edges[edges])) == 8
+        if kind == CANDIDATE_FEE:
+            # two of the edges bound one polygon, whose plane holds the line
+            faces = [set(scene.edge_faces[scene.edge_face_offsets[e] : scene.edge_face_offsets[e + 1]]) for e in edges]
+            shared = [p for j in range(4) for k in range(j + 1, 4) for p in faces[j] & faces[k]]
+            assert len(shared) == 1
+            normal = scene.normals[shared[0]]
+            assert abs(normal @ c.direction[i]) <= scene.tol.cosine
+            assert abs(normal @ c.origin[i] + scene.plane_offsets[shared[0]]) <= 4 * tol
     assert max(line_keys(c).values()) == 1, "a candidate proposed twice"
 
 

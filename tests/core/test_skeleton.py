@@ -58,11 +58,6 @@ DEGENERATE = pytest.mark.xfail(
     "they run into, boxes side by side or in a room corner: arcs whose end keys differ at their two nodes); "
     "those queries are refused, see test_answered_form_factors_are_exact_in_degenerate_scenes",
 )
-FACE_NODES = pytest.mark.xfail(
-    strict=True,
-    reason="EEE arcs ending where their lines enter a face's plane need the face-related nodes (FEE, EFE) of "
-    "seed 003's appendix, which the catalogue does not have yet",
-)
 
 
 @cache
@@ -178,12 +173,10 @@ def test_view_arcs_have_both_end_nodes(name):
     assert (arcs.node[ev] < len(skeleton.nodes)).all()
 
 
-@pytest.mark.parametrize(
-    "name",
-    [pytest.param(name, marks=FACE_NODES) for name in ["generic room 0", "generic room 1", "generic room 2"]]
-    + BOX_ROOMS,
-)
+@pytest.mark.parametrize("name", ["generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS])
 def test_no_dangling_arc_in_closed_rooms(name):
+    """Every arc, EV and EEE, has both end nodes: EEE swaths turning into a face's plane end at its FEE / EFE
+    nodes (seed 003, appendix 7.1)."""
     skeleton = _skeleton(name)
     arcs = skeleton.arcs
     assert len(arcs) > 0
