@@ -59,6 +59,15 @@ DEGENERATE = pytest.mark.xfail(
     "those queries are refused, see test_answered_form_factors_are_exact_in_degenerate_scenes",
 )
 
+ORACLE = pytest.mark.xfail(
+    strict=True,
+    reason="exact_form_factors, not the skeleton: at vertex 55 of generic room 2 it gives 7.7e-4 (receiver 37) "
+    "and 1.3e-4 (receiver 42) for source 28, a face of a closed box whose plane has the vertex 0.23 m behind it "
+    "(its back side faces the vertex from inside the box, so the exact value is 0, as the skeleton says and "
+    "test_faces_seen_from_behind_are_hidden checks); its projections of the box's faces 26 and 30 from there "
+    "cover too little of the source",
+)
+
 
 @cache
 def _scene(name: str) -> Scene:
@@ -194,6 +203,8 @@ def test_no_dangling_arc_in_closed_rooms(name):
     [
         "box over floor",
         "generic room 0",
+        "generic room 1",
+        pytest.param("generic room 2", marks=ORACLE),
         *BOX_ROOMS,
         pytest.param("lamp table", marks=DEGENERATE),
         pytest.param("furnished room 0", marks=DEGENERATE),
@@ -229,6 +240,33 @@ def test_answered_form_factors_are_exact_in_degenerate_scenes(name):
             f"vertex {vertices[worst]}, receiver {receivers[worst]}, source {source}: "
             f"skeleton {values[worst, source]!r}, exact {exact[worst]!r}"
         )
+
+
+@pytest.mark.parametrize("name", ["generic room 0", "generic room 1", "generic room 2"])
+def test_faces_seen_from_behind_are_hidden(name):
+    """A face of a closed convex object is invisible from any point strictly behind its plane (outside the
+    object): the segment to a point of the face arrives from its back side, inside the object, so it crossed
+    the object's surface before. The skeleton gives exactly 0 for every such (vertex, face, receiver) of the
+    generic rooms -- among them vertex 55, source 28 of generic room 2, where exact_form_factors does not
+    (see ORACLE)."""
+    scene, skeleton = _scene(name), _skeleton(name)
+    margin = 1e-6 * scene.diagonal
+    vertices, receivers = _vertex_receivers(scene)
+    checked = 0
+    for obj in np.unique(scene.object_ids):
+        faces = np.flatnonzero(scene.object_ids == obj)
+        corners = np.unique(np.concatenate([scene.polygon_vertices(int(p)) for p in faces]))
+        heights = scene.vertices[corners] @ scene.normals[faces].T + scene.plane_offsets[faces]
+        if len(faces) < 4 or not scene.solid[faces].all() or heights.max() > margin:
+            continue  # not a closed convex solid (the room's inward walls, the light)
+        for face in faces:
+            behind = scene.vertices[vertices] @ scene.normals[face] + scene.plane_offsets[face] < -margin
+            for v, r in zip(vertices[behind], receivers[behind], strict=True):
+                if scene.object_ids[r] == obj:
+                    continue
+                assert skeleton.form_factor(int(v), int(face), int(r)) == 0.0, f"vertex {v}, face {face}, receiver {r}"
+                checked += 1
+    assert checked > 1000
 
 
 def _free_convex_corners(scene: Scene) -> np.ndarray:
