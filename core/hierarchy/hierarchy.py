@@ -216,6 +216,11 @@ class Hierarchy(HierarchyCore):
         """(E,) int64 parent element (-1 for input polygons)."""
         return self._e_parent.data.copy()
 
+    def element_tree(self) -> tuple:
+        """Every element's corners and children at once: (vertices (E, 3) int64 corner vertex ids, -1 for input
+        polygons; first_child (E,) int64, -1 for leaves; child_count (E,) int64)."""
+        return self._e_vertices.data.copy(), self._e_first_child.data.copy(), self._e_child_count.data.copy()
+
     def element_children(self, element: int) -> np.ndarray:
         """Children of an element (C,) int64, consecutive ids; empty for a leaf."""
         first = int(self._e_first_child.buf[element])

@@ -30,6 +30,10 @@ class Settings:
         the ranked discontinuities.
     discontinuities: build the Visibility Skeleton for the emitters and insert their ranked visual events
         (sections 5 and 6.4) from iteration regular_levels + 1 on; False refines at the worst samples only.
+    source_refinement: with exact form factors, links whose source is too uneven for its average are split into
+        exact links to elements of the source's hierarchy (sources.py). Off by default: each refined link
+        becomes one link per element of the source's first grid level (hundreds), and at vertices against
+        touching objects it moves the energy balance by about 1 %, until the source tree has coarser levels.
     display_max_luminance: L_dmax of Ward's operator in cd/m^2; luminous_efficacy: lm/W turning our W/m^2
         into photometric units (179 lm/W, the white-light efficacy Ward's Radiance uses).
     grid: the regular subdivision's spacing; seed: the jittered rays' seed.
@@ -41,6 +45,7 @@ class Settings:
     form_factors: str | int = "exact"
     regular_levels: int = 2
     discontinuities: bool = True
+    source_refinement: bool = False
     display_max_luminance: float = 100.0
     luminous_efficacy: float = 179.0
     grid: GridSettings = field(default_factory=GridSettings)
@@ -61,6 +66,8 @@ class Settings:
             raise VisradError(f"Settings.regular_levels must be an integer >= 0, got {self.regular_levels!r}")
         if not isinstance(self.discontinuities, bool):
             raise VisradError(f"Settings.discontinuities must be True or False, got {self.discontinuities!r}")
+        if not isinstance(self.source_refinement, bool):
+            raise VisradError(f"Settings.source_refinement must be True or False, got {self.source_refinement!r}")
         if not self.display_max_luminance > 0.0 or not self.luminous_efficacy > 0.0:
             raise VisradError("Settings.display_max_luminance and luminous_efficacy must be positive")
 

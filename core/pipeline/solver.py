@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
+from scipy.sparse.linalg import LinearOperator, gmres, splu
 
 from ..errors import CancelledError, VisradError
 from ..hierarchy import Hierarchy
@@ -43,6 +43,7 @@ from .oracle import exact_transfers
 from .perception import LUMINANCE_WEIGHTS, radiosity_threshold
 from .result import Result
 from .settings import Settings
+from .sources import element_pull, element_variation, fold_to_polygons, refine_sources
 
 Progress = Callable[[str, float], None]
 # receiver points linked per chunk: progress and cancel get a say this often
@@ -52,6 +53,11 @@ _LINK_CHUNK = 2048
 # that the energy balance holds where the JND is a large part of the radiosity (dim scenes)
 _INHERIT_JND = 0.5
 _INHERIT_RELATIVE = 0.002
+# the error a link to a source's average may carry before the source is refined for it, in JND: gathered from many
+# sources, the errors of their averages stay below what the refinement test can see
+_SOURCE_JND = 0.25
+# the largest radiosity system solved by sparse LU; larger ones (source refinement) by GMRES
+_DIRECT_SOLVE_COLUMNS = 4096
 # most visual events inserted into one receiver polygon per refinement iteration, highest Delta B first
 _EVENTS_PER_POLYGON = 64
 Cancel = Callable[[], bool]
@@ -191,7 +197,7 @@ class Solver:
             except StopIteration as done:
                 checks = done.value
                 break
-        gather = self._gather_matrix(state.links, len(state.radiosity))
+        gather = self._gather_matrix(state.links, len(state.radiosity), state.hierarchy)
         visible = self._visible_triangles(mesh)
         errors, worst, per_source = measure(
             checks, mesh, gather, state.sources, self.scene.reflectance, self.scene.two_sided, visible
@@ -243,7 +249,12 @@ class Solver:
         for fraction in self._link_refined_vertices(hierarchy, state, mesh, exact, parts):
             yield 0.4 + 0.5 * fraction
         checks = carry(checks, mesh, exact, hierarchy.export_leaves(), self._emitters)
-        self.lighting = self._gathered(hierarchy, LinkSet.concatenate(parts), checks)
+        lighting = self._gathered(hierarchy, LinkSet.concatenate(parts), checks)
+        if self.settings.exact and self.settings.source_refinement:
+            links, record["source_links_refined"] = self._refine_sources(lighting)
+            if record["source_links_refined"]:
+                lighting = self._gathered(hierarchy, links, checks)
+        self.lighting = lighting
         self._rejected_events.update(rejected)
         if not regular:
             for polygon, piece, segment in inserted:
@@ -375,7 +386,7 @@ class Solver:
             (weights.ravel(), (np.repeat(np.arange(len(rows)), 3), corners.ravel())),
             shape=(len(rows), len(state.radiosity)),
         )
-        inherited = (spread @ self._gather_matrix(state.links, len(state.radiosity))).tocoo()
+        inherited = (spread @ self._gather_matrix(state.links, len(state.radiosity), state.hierarchy)).tocoo()
         keep = ~wanted[inherited.row, inherited.col // 2] & (inherited.data != 0.0)
         parts.append(LinkSet(rows[inherited.row[keep]], inherited.col[keep].astype(np.int64), inherited.data[keep]))
         for start in range(0, len(rows), _LINK_CHUNK):
@@ -403,8 +414,9 @@ class Solver:
         local = luminance[mesh.triangles].mean(axis=1)
         return np.minimum(_INHERIT_JND * state.threshold, _INHERIT_RELATIVE * local)
 
-    def _gather_matrix(self, links: LinkSet, n_rows: int):
-        """(n_rows, 2 P) sparse effective form factors of the links."""
+    def _gather_matrix(self, links: LinkSet, n_rows: int, hierarchy: Hierarchy):
+        """(n_rows, 2 P) sparse effective form factors of the links, per polygon side (element links added up)."""
+        links = fold_to_polygons(links, hierarchy.element_polygon())
         shape = (n_rows, 2 * self.scene.n_polygons)
         return sp.csr_matrix((links.form_factor, (links.point, links.column)), shape=shape)
 
@@ -420,33 +432,70 @@ class Solver:
         return interior
 
     def _gathered(self, hierarchy: Hierarchy, links: LinkSet, checks: LeafChecks | None = None) -> _Lighting:
-        """Solve for the radiosity at every vertex side given the links."""
+        """Solve for the radiosity at every vertex side given the links (to polygon sides and, after source
+        refinement, to element sides: each radiates the pull of its leaves)."""
         n_rows = 2 * hierarchy.vertex_count
-        n_cols = 2 * self.scene.n_polygons
-        gather = self._gather_matrix(links, n_rows)
-        pull = self._pull_matrix(hierarchy, n_rows, n_cols)
+        polygon_columns = 2 * self.scene.n_polygons
+        elements = np.unique(links.column[links.column >= polygon_columns] // 2)
+        columns = np.concatenate([np.arange(polygon_columns), (2 * elements[:, None] + [FRONT, BACK]).ravel()])
+        n_cols = len(columns)
+        gather = sp.csr_matrix(
+            (links.form_factor, (links.point, np.searchsorted(columns, links.column))), shape=(n_rows, n_cols)
+        )
+        pull = self._pull_matrix(hierarchy, n_rows, polygon_columns)
+        column_emission = self._emission
+        if len(elements):
+            mesh = hierarchy.export_leaves()
+            below = element_pull(
+                mesh, self._visible_triangles(mesh), hierarchy.element_parent(), self.scene.n_polygons, elements,
+                n_rows,
+            )  # fmt: skip
+            pull = sp.vstack([pull, below]).tocsr()
+            column_polygon = hierarchy.element_polygon()[columns // 2]
+            column_emission = self._emission[2 * column_polygon + columns % 2]
         row_polygon = np.repeat(hierarchy.vertex_polygon(), 2)
         rho = self.scene.reflectance[row_polygon]
         emission = self._emission[2 * row_polygon + np.tile([FRONT, BACK], hierarchy.vertex_count)]
         bounces = self.settings.max_bounces
         sources = np.empty((n_cols, 3))
         if bounces is None:
-            identity = sp.identity(n_cols, format="csc")
             for c in range(3):
-                system = identity - (pull @ sp.diags(rho[:, c]) @ gather).tocsc()
-                sources[:, c] = splu(system).solve(pull @ emission[:, c])
+                sources[:, c] = _solve_columns(pull, sp.diags(rho[:, c]) @ gather, pull @ emission[:, c])
         else:
-            sources = self._emission.copy()
+            sources = column_emission.copy()
             for _ in range(bounces - 1):
                 sources = pull @ (emission + rho * (gather @ sources))
         radiosity = emission + rho * (gather @ sources)
         if bounces is None:
             sources = pull @ radiosity
-        average = (pull @ radiosity)[0::2]
+        average = (pull @ radiosity)[:polygon_columns:2]
         areas = self.scene.areas
         adaptation = (areas[:, None] * average).sum(axis=0) / areas.sum()
         threshold = radiosity_threshold(adaptation, self.settings)
-        return _Lighting(hierarchy, links, radiosity, sources, threshold, checks)
+        return _Lighting(hierarchy, links, radiosity, sources[:polygon_columns], threshold, checks)
+
+    def _refine_sources(self, state: _Lighting) -> tuple:
+        """The links of `state` with the sources too uneven for their average refined (sources.py): (links,
+        number of polygon links refined)."""
+        hierarchy = state.hierarchy
+        mesh = hierarchy.export_leaves()
+        variation = element_variation(
+            mesh, self._visible_triangles(mesh), state.radiosity, hierarchy.element_parent(), self.scene.n_polygons
+        )
+        folded = fold_to_polygons(state.links, hierarchy.element_polygon())
+        merged = sp.csr_matrix(
+            (folded.form_factor, (folded.point, folded.column)),
+            shape=(len(state.radiosity), 2 * self.scene.n_polygons),
+        ).tocoo()
+        links = LinkSet(merged.row.astype(np.int64), merged.col.astype(np.int64), merged.data)
+        row_polygon = np.repeat(hierarchy.vertex_polygon(), 2)
+        rho = self.scene.reflectance[row_polygon] @ LUMINANCE_WEIGHTS
+        with np.errstate(divide="ignore"):
+            limits = np.where(rho > 0.0, _SOURCE_JND * state.threshold / rho, np.inf)
+        return refine_sources(
+            self.scene, self.bvh, hierarchy, links, np.repeat(hierarchy.vertex_positions(), 2, axis=0), row_polygon,
+            np.repeat(self._vertex_interiors(hierarchy), 2, axis=0), self.facing, variation, limits,
+        )  # fmt: skip
 
     def _pull_matrix(self, hierarchy: Hierarchy, n_rows: int, n_cols: int):
         """(2 P, 2 N) sparse: each polygon side's area-weighted average of its leaf triangles' vertex means."""
@@ -539,6 +588,20 @@ class Solver:
             hierarchy.insert_points(polygon, points)
             inserted += len(points)
         return inserted
+
+
+def _solve_columns(pull, reflected_gather, emitted: np.ndarray) -> np.ndarray:
+    """X solving (I - pull R G) X = pull E for the radiosity X each column radiates, given pull (C, 2 N),
+    R G (2 N, C) and pull E (C,): directly when the columns are polygon sides only (a small system), else by
+    GMRES on the operator (the system of element columns is large and only its products are cheap)."""
+    size = pull.shape[0]
+    if size <= _DIRECT_SOLVE_COLUMNS:
+        return splu(sp.identity(size, format="csc") - (pull @ reflected_gather).tocsc()).solve(emitted)
+    system = LinearOperator((size, size), matvec=lambda x: x - pull @ (reflected_gather @ x), dtype=np.float64)
+    solution, info = gmres(system, emitted, rtol=1e-12, atol=0.0, restart=60, maxiter=200)
+    if info != 0:
+        raise VisradError(f"the radiosity system of {size} sources did not converge (GMRES info {info})")
+    return solution
 
 
 def _longest_side(corners: np.ndarray) -> float:

@@ -103,7 +103,10 @@ def test_lazy_links_stay_within_the_jnd_of_exact_links_on_the_same_mesh():
     exact_links = LinkSet.concatenate(parts)
     exact = eager._gathered(state.hierarchy, exact_links)
     shape = (len(state.radiosity), 2 * scene.n_polygons)
-    differs = np.abs(lazy._gather_matrix(state.links, shape[0]) - eager._gather_matrix(exact_links, shape[0]))
+    differs = np.abs(
+        lazy._gather_matrix(state.links, shape[0], state.hierarchy)
+        - eager._gather_matrix(exact_links, shape[0], state.hierarchy)
+    )
     inherited = int((differs > 1e-12).sum())
     touching = np.repeat(_touching_another_polygon(scene, state.hierarchy), 2)
     difference = np.abs(state.radiosity - exact.radiosity)[~touching] @ LUMINANCE_WEIGHTS
