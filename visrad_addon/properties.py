@@ -15,8 +15,10 @@ from .convert import EXCLUDE_PROPERTY
 # Starting points, to be tuned with the solver's benchmarks: Accurate is the 1999 paper's mode (exact
 # form factors from the visibility skeleton), Fast its ray-cast alternative.
 PRESETS = {
-    "ACCURATE": {"jnd": 0.02, "max_iterations": 10, "form_factors": "EXACT", "rays": 16, "discontinuities": True},
-    "FAST": {"jnd": 0.05, "max_iterations": 4, "form_factors": "RAYS", "rays": 16, "discontinuities": False},
+    "ACCURATE": {"jnd": 0.02, "max_iterations": 10, "form_factors": "EXACT", "rays": 16, "discontinuities": True,
+                 "source_refinement": False},
+    "FAST": {"jnd": 0.05, "max_iterations": 4, "form_factors": "RAYS", "rays": 16, "discontinuities": False,
+             "source_refinement": False},
 }
 
 
@@ -84,6 +86,13 @@ class VisRadSettings(bpy.types.PropertyGroup):
         "matter (from the third refinement on); off refines at the worst samples only",
         default=True,
     )
+    source_refinement: BoolProperty(
+        name="Refine Sources",
+        description="Gather reflected light from the parts of each surface where its radiance varies, not from "
+        "its average: much more accurate indirect light near bright spots and corners, many more links (exact "
+        "form factors only)",
+        default=False,
+    )
 
 
 def solver_settings(props: VisRadSettings) -> dict:
@@ -97,6 +106,7 @@ def solver_settings(props: VisRadSettings) -> dict:
         "max_bounces": None if props.max_bounces == 0 else int(props.max_bounces),
         "form_factors": "exact" if props.form_factors == "EXACT" else int(props.rays),
         "discontinuities": bool(props.discontinuities),
+        "source_refinement": bool(props.source_refinement),
     }
 
 

@@ -47,7 +47,7 @@ SOLVER = "solver"
 STATS = "stats"
 WRITTEN = "written"
 # core Settings fields the add-on's settings dict carries
-_SETTINGS_FIELDS = ("jnd", "max_iterations", "max_bounces", "form_factors", "discontinuities")
+_SETTINGS_FIELDS = ("jnd", "max_iterations", "max_bounces", "form_factors", "discontinuities", "source_refinement")
 # relative cost of the stages, for one progress bar over several of them (measured on the sample scenes:
 # visibility is cheap, a refinement iteration costs several coarse lightings)
 _WEIGHTS = {"build_skeleton": 1.0, "coarse_lighting": 3.0, "refine": 10.0}

@@ -40,6 +40,9 @@ class VISRAD_PT_main(_VisRadPanel, bpy.types.Panel):
         row.enabled = props.form_factors == "RAYS"
         row.prop(props, "rays")
         column.prop(props, "discontinuities")
+        refine = column.row()
+        refine.enabled = props.form_factors == "EXACT"
+        refine.prop(props, "source_refinement")
         layout.prop(props, "max_bounces")
 
 

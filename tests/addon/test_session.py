@@ -19,6 +19,7 @@ SETTINGS = {
     "max_bounces": None,
     "form_factors": "exact",
     "discontinuities": True,
+    "source_refinement": False,
     "preset": "accurate",
 }
 
@@ -126,6 +127,7 @@ def test_settings_presets_and_solver_keywords(small_scene):
         "max_bounces": None,
         "form_factors": 16,
         "discontinuities": False,
+        "source_refinement": False,
     }
     props.preset = "CUSTOM"
     props.form_factors, props.rays, props.max_bounces = "EXACT", 64, 1
@@ -135,6 +137,8 @@ def test_settings_presets_and_solver_keywords(small_scene):
     assert solver_settings(props)["form_factors"] == 64
     props.discontinuities = True
     assert solver_settings(props)["discontinuities"] is True
+    props.source_refinement = True
+    assert solver_settings(props)["source_refinement"] is True
 
 
 def test_the_exclusion_toggle_is_the_custom_property_conversion_reads(small_scene):
