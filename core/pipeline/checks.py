@@ -18,12 +18,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from .interpolation import SAMPLE_WEIGHTS, locate
-from .links import BACK, FRONT, compute_links
+from .links import BACK, FRONT, LinkSet, _inside_limit, compute_links
 from .perception import LUMINANCE_WEIGHTS
 
 N_SAMPLES = len(SAMPLE_WEIGHTS)
-# leaves whose samples are linked at once (progress and cancel get a say this often)
-_CHUNK_LEAVES = 512
+# leaf sides whose samples are linked at once (progress and cancel get a say this often)
+_CHUNK_LEAVES = 1024
 
 
 @dataclass(frozen=True)
@@ -60,33 +60,67 @@ def sample_points(mesh) -> np.ndarray:
 
 def complete_steps(checks: LeafChecks, mesh, scene, bvh, facing, settings):
     """Compute the sample form factors of the leaves not known yet (both sides of two-sided polygons); a
-    generator yielding the fraction done and returning the completed LeafChecks."""
+    generator yielding the fraction done and returning the completed LeafChecks.
+
+    A sample shared by leaves (an edge midpoint between two leaves of the same polygon side, evaluated at the
+    same point) is linked once, to the sources live at any of them; each leaf keeps those live at it."""
     todo = np.flatnonzero(~checks.known)
     if not len(todo):
         return checks
     samples = sample_points(mesh)
+    back = todo[scene.two_sided[mesh.triangle_polygon[todo]]]
+    leaves = np.concatenate([todo, back])
+    sides = np.concatenate([np.full(len(todo), FRONT), np.full(len(back), BACK)])
+    # by polygon and side, so that leaves sharing edges fall into the same chunk
+    order = np.lexsort((leaves, sides, mesh.triangle_polygon[leaves]))
+    leaves, sides = leaves[order], sides[order]
     parts = [checks.sampled.tocoo()]
-    sides = [(FRONT, todo), (BACK, todo[scene.two_sided[mesh.triangle_polygon[todo]]])]
-    total = sum(len(t) for _, t in sides)
-    done = 0
-    for side, leaves in sides:
-        for start in range(0, len(leaves), _CHUNK_LEAVES):
-            chunk = leaves[start : start + _CHUNK_LEAVES]
-            points = samples[chunk].reshape(-1, 3)
-            polygons = np.repeat(mesh.triangle_polygon[chunk], N_SAMPLES)
-            links = compute_links(
-                scene, bvh, points, polygons, np.full(len(points), side), facing, settings,
-                np.repeat(samples[chunk, 0], N_SAMPLES, axis=0), np.repeat(checks.live[chunk], N_SAMPLES, axis=0),
-            )  # fmt: skip
-            leaf = chunk[links.point // N_SAMPLES]
-            rows = (2 * leaf + side) * N_SAMPLES + links.point % N_SAMPLES
-            parts.append(sp.coo_matrix((links.form_factor, (rows, links.column)), shape=checks.sampled.shape))
-            done += len(chunk)
-            yield done / total
-    sampled = sp.csr_matrix(parts[0])
-    for part in parts[1:]:
-        sampled = sampled + part.tocsr()
+    for start in range(0, len(leaves), _CHUNK_LEAVES):
+        chunk, chunk_sides = leaves[start : start + _CHUNK_LEAVES], sides[start : start + _CHUNK_LEAVES]
+        links = _link_samples(checks, mesh, samples, chunk, chunk_sides, scene, bvh, facing, settings)
+        leaf, sample = links.point // N_SAMPLES, links.point % N_SAMPLES
+        rows = (2 * chunk[leaf] + chunk_sides[leaf]) * N_SAMPLES + sample
+        parts.append(sp.coo_matrix((links.form_factor, (rows, links.column)), shape=checks.sampled.shape))
+        yield min(start + _CHUNK_LEAVES, len(leaves)) / len(leaves)
+    # the rows of the leaves not known were empty: one sum of the parts
+    sampled = sp.csr_matrix(
+        (
+            np.concatenate([part.data for part in parts]),
+            (np.concatenate([part.row for part in parts]), np.concatenate([part.col for part in parts])),
+        ),
+        shape=checks.sampled.shape,
+    )
     return LeafChecks(checks.corners, checks.live, sampled, np.ones(len(checks.known), dtype=bool))
+
+
+def _link_samples(checks, mesh, samples, leaves, sides, scene, bvh, facing, settings) -> LinkSet:
+    """The links of the samples of leaves (C,) on sides (C,) to the sources live at their leaf (point: the
+    sample's index c S + s), each distinct sample point linked once."""
+    points = samples[leaves].reshape(-1, 3)
+    polygons = np.repeat(mesh.triangle_polygon[leaves], N_SAMPLES)
+    point_sides = np.repeat(sides, N_SAMPLES)
+    interior = np.repeat(samples[leaves, 0], N_SAMPLES, axis=0)
+    at = _inside_limit(scene, points, polygons, point_sides, facing, interior)
+    # a sample is the same for its leaves when they share polygon, side and evaluation point (an edge midpoint is
+    # the same sum of the same two corners either way round)
+    key = np.column_stack([polygons.astype(np.float64), point_sides.astype(np.float64), at])
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    by_point = np.argsort(inverse, kind="stable")
+    starts = np.searchsorted(inverse[by_point], np.arange(len(first) + 1))
+    live = np.repeat(checks.live[leaves], N_SAMPLES, axis=0)
+    wanted = np.logical_or.reduceat(live[by_point], starts[:-1], axis=0)
+    distinct = compute_links(
+        scene, bvh, at[first], polygons[first], point_sides[first], facing, settings, wanted=wanted, evaluated=True
+    )
+    # every link of a distinct point goes to each sample sharing it where its source is live
+    count = np.diff(starts)[distinct.point]
+    link = np.repeat(np.arange(len(distinct)), count)
+    offset = np.arange(len(link)) - np.repeat(np.cumsum(count) - count, count)
+    sample = by_point[starts[distinct.point][link] + offset]
+    column = distinct.column[link]
+    keep = live[sample, column // 2]
+    return LinkSet(sample[keep], column[keep], distinct.form_factor[link][keep])
 
 
 def measure(checks: LeafChecks, mesh, gather, sources, reflectance, two_sided, visible) -> tuple:

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import VisradError
 from ..raycast import jittered_form_factors
-from ..visibility import exact_form_factors
+from ..visibility import exact_pair_form_factors
 
 FRONT = 0
 BACK = 1
@@ -109,45 +109,48 @@ def _available_memory() -> int | None:
     return None
 
 
-def compute_links(scene, bvh, points, polygons, sides, facing, settings, interior=None, wanted=None) -> LinkSet:
+def compute_links(
+    scene, bvh, points, polygons, sides, facing, settings, interior=None, wanted=None, evaluated=False
+) -> LinkSet:
     """The links of receiver points: every source column the point can see, with its form factor.
 
     points (N, 3) float64 on their polygons; polygons (N,) int64; sides (N,) int8 FRONT/BACK; facing from
     facing_sources; interior (N, 3): a point inside the visible part of each point's polygon near it (the
     centroid of a leaf triangle around it; default the polygon's centroid), the direction of the limit taken
     at points on a touching boundary; wanted (N, P) bool: the only sources to link each point with (default
-    all). Links with a zero form factor (the source entirely hidden) are dropped.
+    all); evaluated: the points are already where their form factors are evaluated (by _inside_limit), and
+    interior is not used. Links with a zero form factor (the source entirely hidden) are dropped.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     polygons = np.asarray(polygons, dtype=np.int64)
     sides = np.asarray(sides, dtype=np.int64)
     normals = scene.normals[polygons] * np.where(sides == BACK, -1.0, 1.0)[:, None]
     eps = scene.tol.length
-    inside = scene.centroids[polygons] if interior is None else interior
-    at = _inside_limit(scene, points, polygons, sides, facing, inside)
-    parts = []
-    for source in range(scene.n_polygons):
-        candidates = facing[polygons, sides, source]
-        if wanted is not None:
-            candidates &= wanted[:, source]
-        candidates = np.nonzero(candidates)[0]
-        if not len(candidates):
-            continue
-        height = at[candidates] @ scene.normals[source] + scene.plane_offsets[source]
-        side = np.where(height > eps, FRONT, np.where(height < -eps, BACK, -1))
-        keep = (side == FRONT) | ((side == BACK) & bool(scene.two_sided[source]))
-        candidates, side = candidates[keep], side[keep]
-        if not len(candidates):
-            continue
-        if settings.exact:
-            ff = exact_form_factors(scene, at[candidates], normals[candidates], source, bvh=bvh)
-        else:
-            ff = jittered_form_factors(
-                scene, bvh, at[candidates], normals[candidates], source, settings.form_factors, settings.seed
+    at = points
+    if not evaluated:
+        inside = scene.centroids[polygons] if interior is None else interior
+        at = _inside_limit(scene, points, polygons, sides, facing, inside)
+    candidates = facing[polygons, sides, :]
+    if wanted is not None:
+        candidates &= wanted
+    # pairs by source, then point: the order of the links
+    source, point = np.nonzero(candidates.T)
+    height = np.einsum("ij,ij->i", at[point], scene.normals[source]) + scene.plane_offsets[source]
+    side = np.where(height > eps, FRONT, BACK)
+    keep = (height > eps) | ((height < -eps) & scene.two_sided[source])
+    source, point, side = source[keep], point[keep], side[keep]
+    if settings.exact:
+        ff = exact_pair_form_factors(scene, at[point], normals[point], source, bvh=bvh)
+    else:
+        ff = np.empty(len(point))
+        bounds = np.searchsorted(source, np.arange(scene.n_polygons + 1))
+        for q in np.flatnonzero(np.diff(bounds)):
+            pairs = slice(bounds[q], bounds[q + 1])
+            ff[pairs] = jittered_form_factors(
+                scene, bvh, at[point[pairs]], normals[point[pairs]], q, settings.form_factors, settings.seed
             )
-        seen = ff > 0.0
-        parts.append(LinkSet(candidates[seen], 2 * source + side[seen], ff[seen]))
-    return LinkSet.concatenate(parts)
+    seen = ff > 0.0
+    return LinkSet(point[seen], 2 * source[seen] + side[seen], ff[seen])
 
 
 # How far inside its polygon a point lying in another polygon's plane is evaluated: a small fraction of the way

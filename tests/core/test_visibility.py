@@ -4,7 +4,13 @@ import pytest
 from core.errors import SceneError
 from core.formfactor import point_polygon_ff
 from core.scene import Scene
-from core.visibility import HORIZON, exact_cut_form_factors, exact_form_factors, exact_view
+from core.visibility import (
+    HORIZON,
+    exact_cut_form_factors,
+    exact_form_factors,
+    exact_pair_form_factors,
+    exact_view,
+)
 from tests.core.furnished_rooms import box_quads, free_points, furnished_room
 from tests.core.naive_visibility import oracle_form_factor
 
@@ -227,6 +233,46 @@ def test_closed_room_identity_on_benchmark_scenes(name):
     normals = random_normals(rng, len(points))
     total = all_form_factors(scene, points, normals).sum(axis=1)
     np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+
+
+def test_pair_form_factors_equal_the_form_factors_per_source():
+    """exact_pair_form_factors, many sources in one parallel call, gives exactly what exact_form_factors gives for
+    each pair alone (free points and points on the floor, every source, shuffled)."""
+    scene, boxes, size = room_scene(2)
+    rng = np.random.default_rng(41)
+    free = free_points(boxes, size, 20, rng)
+    floor = np.column_stack([rng.uniform(0, size[0], 20), rng.uniform(0, size[1], 20), np.zeros(20)])
+    points = np.concatenate([free, floor])
+    normals = np.concatenate([random_normals(rng, 20), np.tile([0.0, 0.0, 1.0], (20, 1))])
+    expected = all_form_factors(scene, points, normals)
+    point, source = np.nonzero(np.ones_like(expected, dtype=bool))
+    order = rng.permutation(len(point))
+    ours = exact_pair_form_factors(scene, points[point[order]], normals[point[order]], source[order])
+    np.testing.assert_array_equal(ours, expected[point[order], source[order]])
+    assert (ours > 0).sum() > 200
+    with pytest.raises(SceneError, match="one entry per point"):
+        exact_pair_form_factors(scene, points, normals, source[:3])
+    with pytest.raises(SceneError, match="outside"):
+        exact_pair_form_factors(scene, points[:1], normals[:1], [scene.n_polygons])
+
+
+def test_views_broken_into_many_pieces_agree_with_the_oracle():
+    """The Desk's floor and walls seen from across the furnished room: the visible region falls into a hundred
+    pieces or more (every blocker meets a few of them); against the shapely oracle."""
+    from bench.scenes import SCENES
+
+    scene = SCENES["desk"]().build()
+    points = np.array([[0.0667, 4.7456, 2.7], [1.4, 4.8845, 2.7], [0.4, 5.0, 2.2381]])
+    normals = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [0.0, -1.0, 0.0]])
+    sources = [0, 3, 4, 39]
+    pieces = [len(exact_view(scene, points[i], normals[i], sources[0]).pieces) for i in range(len(points))]
+    assert min(pieces) >= 100
+    for source in sources:
+        ours = exact_pair_form_factors(scene, points, normals, np.full(len(points), source))
+        others = [scene.polygon(j) for j in range(scene.n_polygons) if j != source]
+        for i in range(len(points)):
+            expected = oracle_form_factor(points[i], normals[i], scene.polygon(source), others)
+            assert abs(ours[i] - expected) <= 1e-9 * max(expected, 1e-3), (source, i, ours[i], expected)
 
 
 def quad_subdivision(quad, levels):
