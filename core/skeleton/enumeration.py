@@ -53,6 +53,7 @@ from ..raycast import CONTACT_VERTEX, _arcs_cover_circle, _contact_arc, _perpend
 from ..scene import Scene
 from .candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 from .topology import scene_topology
+from .validation import _shared_face
 
 DEFAULT_CHUNK = 100_000
 """Largest number of candidates in one yielded chunk by default (about one second of validation)."""
@@ -1790,7 +1791,7 @@ def _face_candidates(
                 ej = crossing[j]
                 # two edges of one face: the line is where the two faces' planes meet (an FF node), whose
                 # swaths all keep two edges of one face (FE pencils, not stored)
-                if _shared_polygon(ef_off, ef_face, ei, ej):
+                if _shared_face(ef_off, ef_face, ei, ej):
                     continue
                 # local visibility at the two crossings: the line must not dive into an edge's object on the
                 # side where the other generators are
@@ -1835,15 +1836,6 @@ def _face_candidates(
                 out = _push(out, count, CANDIDATE_FEE, -1, -1, four[0], four[1], four[2], four[3], p, d)
                 count += 1
     return _trim(out, count)
-
-
-@njit(cache=True)
-def _shared_polygon(ef_off, ef_face, e, f):
-    for i in range(ef_off[e], ef_off[e + 1]):
-        for k in range(ef_off[f], ef_off[f + 1]):
-            if ef_face[i] == ef_face[k]:
-                return True
-    return False
 
 
 @njit(cache=True)
