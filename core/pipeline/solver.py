@@ -58,6 +58,9 @@ _INHERIT_RELATIVE = 0.002
 _SOURCE_JND = 0.25
 # the largest radiosity system solved by sparse LU; larger ones (source refinement) by GMRES
 _DIRECT_SOLVE_COLUMNS = 4096
+# reflectors whose visual events are meshed too, and the least power (a fraction of the emitters') they radiate
+_INDIRECT_SOURCES = 2
+_INDIRECT_POWER = 0.05
 # most visual events inserted into one receiver polygon per refinement iteration, highest Delta B first
 _EVENTS_PER_POLYGON = 64
 Cancel = Callable[[], bool]
@@ -102,6 +105,10 @@ class Solver:
         self._inserted_events: set[tuple[int, int]] = set()
         self._rejected_events: set[tuple[int, int]] = set()
         self._events: dict[int, ReceiverEvents] = {}
+        # the reflectors whose visual events are inserted too (indirect shadows), chosen at the first
+        # discontinuity iteration; None before
+        self.indirect_sources: np.ndarray | None = None
+        self._indirect_inserted: set[tuple[int, int]] = set()
         self.iterations = 0
         self.converged = False
         # why refinement stopped before converging (a hierarchy defect), or None
@@ -222,6 +229,12 @@ class Solver:
             hierarchy.queue_regular_grid(refined)
             hierarchy.complete_step()
         else:
+            if self.skeleton is not None and self.indirect_sources is None:
+                chosen = self._important_reflectors(state)
+                for fraction in self.skeleton.build_steps(chosen, self.cancel):
+                    yield 0.3 + 0.05 * fraction
+                self.indirect_sources = chosen
+                record["indirect_sources"] = len(chosen)
             covered, inserted = self._insert_discontinuities(hierarchy, state, mesh, bad)
             self._insert_worst_samples(hierarchy, mesh, bad & ~covered, worst)
             try:
@@ -259,6 +272,9 @@ class Solver:
         if not regular:
             for polygon, piece, segment in inserted:
                 self._inserted_events.add((polygon, piece))
+                events = self._events[polygon]
+                if not self._emitters[events.emitter[events.group == piece]].all():
+                    self._indirect_inserted.add((polygon, piece))
                 self.discontinuities.setdefault(polygon, []).append(segment)
         self.iterations += 1
         record["vertices"] = hierarchy.vertex_count
@@ -314,6 +330,7 @@ class Solver:
             "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
             "polygons": self.scene.n_polygons,
             "discontinuities_inserted": len(self._inserted_events),
+            "discontinuities_indirect": len(self._indirect_inserted),
             "discontinuities_rejected": len(self._rejected_events),
             "discontinuities_available": sum(len(events.pieces) for events in self._events.values()),
         }
@@ -576,10 +593,24 @@ class Solver:
         return covered, inserted
 
     def _receiver_events(self, polygon: int) -> ReceiverEvents:
-        """The visual events of the emitters on `polygon`, from the skeleton, computed once per polygon."""
+        """The visual events of the emitters and of the indirect sources on `polygon`, from the skeleton,
+        computed once per polygon (the indirect sources are chosen before the first call)."""
         if polygon not in self._events:
-            self._events[polygon] = receiver_events(self.skeleton, self.scene, polygon, np.flatnonzero(self._emitters))
+            sources = np.flatnonzero(self._emitters)
+            if self.indirect_sources is not None:
+                sources = np.concatenate([sources, self.indirect_sources])
+            self._events[polygon] = receiver_events(self.skeleton, self.scene, polygon, sources)
         return self._events[polygon]
+
+    def _important_reflectors(self, state: _Lighting) -> np.ndarray:
+        """The non-emitting polygons radiating the most light (luminance-weighted radiosity x area), at most
+        _INDIRECT_SOURCES of them and each at least _INDIRECT_POWER of what the emitters emit: the secondary
+        sources whose shadows (indirect shadows, seed 000 section 7.2) are worth meshing."""
+        radiated = (state.sources @ LUMINANCE_WEIGHTS).reshape(-1, 2).max(axis=1) * self.scene.areas
+        emitted = radiated[self._emitters].sum()
+        radiated[self._emitters] = 0.0
+        order = np.argsort(-radiated, kind="stable")[:_INDIRECT_SOURCES]
+        return order[radiated[order] >= _INDIRECT_POWER * emitted].astype(np.int64)
 
     def _insert_maxima(self, hierarchy: Hierarchy, state: _Lighting, polygons: np.ndarray) -> int:
         """Queue the maxima of the important unoccluded transfers onto the polygons being refined (6.3)."""
