@@ -116,9 +116,10 @@ def stats_lines(stats: dict, max_iterations: int | None = None) -> list[str]:
     if skeleton:
         lines.append(f"Skeleton: {sum(skeleton['nodes'].values()):,} nodes, {sum(skeleton['arcs'].values()):,} arcs")
     if stats.get("discontinuities_available"):
+        indirect = stats.get("discontinuities_indirect", 0)
         lines.append(
             f"Discontinuities: {stats['discontinuities_inserted']:,} inserted "
-            f"of {stats['discontinuities_available']:,} found"
+            f"of {stats['discontinuities_available']:,} found" + (f" ({indirect:,} indirect)" if indirect else "")
         )
     if stats.get("lit"):
         lines.append(f"Links: {stats['links']:,}")
