@@ -521,15 +521,28 @@ def _split(xy, labels, ax, ay, bx, by, cut_polygon, cut_edge, eps):
     """Split a convex counter-clockwise 2-D polygon by the directed line a->b.
 
     Returns (inside_xy, inside_labels, outside_xy, outside_labels): inside is left of a->b. Corners within
-    eps of the line count as on it; parts of zero width are returned empty.
+    eps of the line count as on it; parts of zero width are returned empty. The polygon is clean (_cleanup):
+    when the line does not cross it, it comes back whole, uncopied, on its side.
     """
     dx = bx - ax
     dy = by - ay
     length = np.sqrt(dx * dx + dy * dy)
     side = np.empty(len(xy))
+    left = False
+    right = False
     for i in range(len(xy)):
         value = (dx * (xy[i, 1] - ay) - dy * (xy[i, 0] - ax)) / length
         side[i] = 0.0 if abs(value) <= eps else value
+        left = left or side[i] > 0.0
+        right = right or side[i] < 0.0
+    if not right or not left:
+        # the other part would be corners on the line only, without area
+        empty_xy = np.empty((0, 2))
+        empty_labels = np.empty((0, 2), dtype=np.int64)
+        if not right and left:
+            return xy, labels, empty_xy, empty_labels
+        if not left and right:
+            return empty_xy, empty_labels, xy, labels
     inside, inside_labels = _keep_positive(xy, labels, side, cut_polygon, cut_edge)
     outside, outside_labels = _keep_positive(xy, labels, -side, cut_polygon, cut_edge)
     in_xy, in_labels = _cleanup(inside, inside_labels, eps)
@@ -614,23 +627,24 @@ def _relation(piece, blocker, eps):
 
 
 @njit(cache=True)
-def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
-    """Remove a convex counter-clockwise blocker from every piece, in place; return the piece lists.
+def _subtract(pieces_xy, pieces_labels, boxes, blocker, blocker_labels, eps):
+    """Remove a convex counter-clockwise blocker from every piece, in place; return the piece lists and boxes.
 
-    A piece the blocker touches is replaced by its first fragment outside the blocker, the others go to the end,
-    and the pieces it covers are removed (the last piece takes their place): the work is proportional to the
-    pieces the blocker meets, not to all of them (a wall seen behind a furnished room keeps a hundred).
+    boxes (C, 4) float64, C >= the number of pieces: the bounding box of each piece (_bounds), grown (a new
+    array returned) when the pieces outgrow it. A piece the blocker touches is replaced by its first fragment
+    outside the blocker, the others go to the end, and the pieces it covers are removed (the last piece takes
+    their place): the work is proportional to the pieces the blocker meets, not to all of them (a wall seen
+    behind a furnished room keeps a hundred).
     """
-    low_x, high_x, low_y, high_y = _bounds(blocker)
+    around = _bounds(blocker)
     removed = np.zeros(len(pieces_xy), dtype=np.bool_)
     any_removed = False
     for index in range(len(removed)):
-        piece = pieces_xy[index]
-        piece_low_x, piece_high_x, piece_low_y, piece_high_y = _bounds(piece)
         # boxes apart by more than eps: a separating line exists, the relation below would be 0
-        if (piece_high_x < low_x - eps or piece_low_x > high_x + eps
-                or piece_high_y < low_y - eps or piece_low_y > high_y + eps):  # fmt: skip
+        if (boxes[index, 1] < around[0] - eps or boxes[index, 0] > around[1] + eps
+                or boxes[index, 3] < around[2] - eps or boxes[index, 2] > around[3] + eps):  # fmt: skip
             continue
+        piece = pieces_xy[index]
         relation = _relation(piece, blocker, eps)
         if relation == 0:
             continue
@@ -658,8 +672,14 @@ def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
                 if removed[index]:
                     pieces_xy[index] = out_xy
                     pieces_labels[index] = out_labels
+                    boxes[index] = _bounds(out_xy)
                     removed[index] = False
                 else:
+                    if len(pieces_xy) == len(boxes):
+                        grown = np.empty((2 * len(boxes), 4))
+                        grown[: len(boxes)] = boxes
+                        boxes = grown
+                    boxes[len(pieces_xy)] = _bounds(out_xy)
                     pieces_xy.append(out_xy)
                     pieces_labels.append(out_labels)
             if len(in_xy) == 0:
@@ -674,24 +694,26 @@ def _subtract(pieces_xy, pieces_labels, blocker, blocker_labels, eps):
                 if index != last:
                     pieces_xy[index] = pieces_xy[last]
                     pieces_labels[index] = pieces_labels[last]
+                    boxes[index] = boxes[last]
                 pieces_xy.pop()
                 pieces_labels.pop()
-    return pieces_xy, pieces_labels
+    return pieces_xy, pieces_labels, boxes
 
 
 @njit(cache=True)
 def _bounds(xy):
-    """Bounding box (low x, high x, low y, high y) of a (K, 2) polygon."""
-    low_x = np.inf
-    high_x = -np.inf
-    low_y = np.inf
-    high_y = -np.inf
+    """Bounding box (low x, high x, low y, high y) of a (K, 2) polygon, as a (4,) array."""
+    box = np.empty(4)
+    box[0] = np.inf
+    box[1] = -np.inf
+    box[2] = np.inf
+    box[3] = -np.inf
     for i in range(len(xy)):
-        low_x = min(low_x, xy[i, 0])
-        high_x = max(high_x, xy[i, 0])
-        low_y = min(low_y, xy[i, 1])
-        high_y = max(high_y, xy[i, 1])
-    return low_x, high_x, low_y, high_y
+        box[0] = min(box[0], xy[i, 0])
+        box[1] = max(box[1], xy[i, 0])
+        box[2] = min(box[2], xy[i, 1])
+        box[3] = max(box[3], xy[i, 1])
+    return box
 
 
 @njit(cache=True)
@@ -737,6 +759,8 @@ def _point_view(
     pieces_labels = List()
     pieces_xy.append(xy)
     pieces_labels.append(visible_labels)
+    boxes = np.empty((16, 4))
+    boxes[0] = _bounds(xy)
 
     # the pyramid (point, visible source): inward side planes, then the source plane itself
     m = len(visible3)
@@ -773,6 +797,10 @@ def _point_view(
     found = bvh_collect_in_planes(
         node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, shaft, eps, candidates
     )
+    # polygons lying on the source (rugs, posters, feet standing on a floor) cut holes that break the view into
+    # many pieces: they go after the blockers in front, which leave fewer pieces to cut and may hide them
+    lying = np.empty(found, dtype=np.int64)
+    n_lying = 0
     for index in range(found):
         blocker = candidates[index]
         if blocker == source or not allowed[blocker]:
@@ -799,9 +827,10 @@ def _point_view(
             if abs(h) > eps:
                 on_plane = False
         if on_plane:
-            if not _covers(blocker, source, areas):
-                continue
-            projected, projected_labels = _footprint(polygon, blocker, origin, u, v, radius, eps2)
+            if _covers(blocker, source, areas):
+                lying[n_lying] = blocker
+                n_lying += 1
+            continue
         elif below or above:
             continue
         elif solid[blocker] and facing < 0.0:
@@ -814,7 +843,16 @@ def _point_view(
             )
         if len(projected) == 0:
             continue
-        pieces_xy, pieces_labels = _subtract(pieces_xy, pieces_labels, projected, projected_labels, eps2)
+        pieces_xy, pieces_labels, boxes = _subtract(pieces_xy, pieces_labels, boxes, projected, projected_labels, eps2)
+        if len(pieces_xy) == 0:
+            return pieces_xy, pieces_labels, frame
+    for index in range(n_lying):
+        blocker = lying[index]
+        polygon = corners[offsets[blocker] : offsets[blocker + 1]]
+        projected, projected_labels = _footprint(polygon, blocker, origin, u, v, radius, eps2)
+        if len(projected) == 0:
+            continue
+        pieces_xy, pieces_labels, boxes = _subtract(pieces_xy, pieces_labels, boxes, projected, projected_labels, eps2)
         if len(pieces_xy) == 0:
             break
     return pieces_xy, pieces_labels, frame
