@@ -281,7 +281,7 @@ def test_the_indirect_bedroom_meshes_indirect_shadows_on_surfaces_the_lamp_canno
     inserted on surfaces lit only indirectly: polygons with no direct light at 66 points spread over each triangle
     of their fan nor at the ends of their inserted segments (behind every lamp's emitting side, or hidden from
     it). Measured: 462 of 733 inserted discontinuities come from the two reflectors, 217 of them on 17 polygons
-    without direct light (ceiling and walls above the shade among them)."""
+    without direct light (three of the room's walls among them; the reflectors are faces inside the shade)."""
     scene = SCENES["indirect-bedroom"]().build()
     solver = Solver(scene, Settings(max_iterations=3))
     result = solver.solve()
