@@ -338,7 +338,7 @@ class HierarchyCore:
         side_a = corner_xy
         side_b = np.concatenate([corner_xy[1:], corner_xy[:1]])
         side_vectors = side_b - side_a
-        side_lengths = np.sqrt(np.einsum("ij,ij->i", side_vectors, side_vectors))
+        side_lengths = np.hypot(side_vectors[:, 0], side_vectors[:, 1])
 
         # Points inserted with a grid (light maxima) stay put and the grid avoids them, and so do points given
         # on a side (matching them is the point, Fig. 6); the others are free samples, moved where their
@@ -419,7 +419,11 @@ class HierarchyCore:
         # of its parent can leave such a needle, even turned over): nothing fits inside it, and a triangulation
         # of its outline would see the outline cross itself. Its points go elsewhere; its sides are joined by a
         # fan so that the leaves around still conform.
-        needle = k == 3 and float(cross2(side_vectors[0], -side_vectors[2])) <= eps * float(side_lengths.max())
+        if k == 3:
+            (ux, uy), (wx, wy) = side_vectors[0].tolist(), side_vectors[2].tolist()
+            needle = wx * uy - wy * ux <= eps * max(side_lengths.tolist())
+        else:
+            needle = False
         if needle:
             interior_xy, interior_kind = _NO_POINTS, _NO_KINDS
             seg_ends = seg_ends[:0]
@@ -442,7 +446,7 @@ class HierarchyCore:
             made = len(cdt_xy)
             triangles = np.array([[0, i, i + 1] for i in range(1, n_ring - 1)], dtype=np.int64)
         else:
-            pieces = _split_at_points(cdt_xy, seg_local, snap)
+            pieces = _split_at_points(cdt_xy, seg_local, snap) if len(seg_local) else seg_local
             triangles, cdt = _triangulate(cdt_xy, origin, unit, n_ring, pieces)
             if cdt.vertices_count() > len(cdt_xy) and len(seg_local) < 2:
                 # A point made where no two inner segments cross: a segment ending a rounding error beyond the
@@ -563,11 +567,9 @@ class HierarchyCore:
         he_parent, he_elements, he_constrained = self._he_parent, self._he_elements, self._he_constrained
         inner_edge: dict = {}
         result = []
-        for c, tri in enumerate(triangles):
+        for c, (t0, t1, t2) in enumerate(triangles):
             row = []
-            for j in range(3):
-                u = tri[j]
-                v = tri[j - 2]
+            for u, v in ((t0, t1), (t1, t2), (t2, t0)):
                 if u < n_ring and v == (u + 1) % n_ring:
                     h = ring_hedges[u]
                 else:
