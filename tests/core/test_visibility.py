@@ -296,13 +296,17 @@ def quad_subdivision(quad, levels):
     return np.array(triangles), np.array(first_child), np.array(child_count), np.array([0, 1])
 
 
-def test_cut_form_factors_match_the_oracle_inside_each_element_and_add_up():
-    scene, boxes, size = room_scene(1)
-    rng = np.random.default_rng(41)
-    points = free_points(boxes, size, 6, rng)
-    normals = random_normals(rng, 6)
+def subdivided_floor(seed, count):
+    """A furnished room, `count` free points with random normals, its floor and a two-level subdivision of it."""
+    scene, boxes, size = room_scene(seed)
+    rng = np.random.default_rng(40 + seed)
+    points = free_points(boxes, size, count, rng)
     floor = int(np.argmax(scene.areas))
-    subdivision = quad_subdivision(scene.polygon(floor), 2)
+    return scene, points, random_normals(rng, count), floor, quad_subdivision(scene.polygon(floor), 2), rng
+
+
+def test_cut_form_factors_match_the_oracle_inside_each_element_and_add_up():
+    scene, points, normals, floor, subdivision, _ = subdivided_floor(1, 6)
     triangles = subdivision[0]
     others = [scene.polygon(j) for j in range(scene.n_polygons) if j != floor]
     whole = exact_form_factors(scene, points, normals, floor)
@@ -324,12 +328,7 @@ def test_cut_form_factors_match_the_oracle_inside_each_element_and_add_up():
 
 
 def test_cut_form_factors_descend_only_where_the_limit_asks():
-    scene, boxes, size = room_scene(2)
-    rng = np.random.default_rng(42)
-    points = free_points(boxes, size, 8, rng)
-    normals = random_normals(rng, 8)
-    floor = int(np.argmax(scene.areas))
-    subdivision = quad_subdivision(scene.polygon(floor), 2)
+    scene, points, normals, floor, subdivision, rng = subdivided_floor(2, 8)
     count = len(subdivision[0])
     variation = rng.uniform(0.0, 1.0, count)
     limits = rng.uniform(0.0, 0.05, len(points))
