@@ -1,7 +1,8 @@
 """Benchmark `solve`: the radiosity pipeline end to end on the scenes of seed 000 section 7.2 (issue 5).
 
 For each scene (Desk, Many Lights, Indirect bedroom, Village, Cornell box): total and per-stage seconds, peak
-memory, links, leaf triangles, iterations and convergence. Then the seed 000 Table 1 analogue on one scene:
+memory, links, leaf triangles, iterations and convergence, discontinuities inserted (and how many of them are
+indirect: events of the brightest reflectors). Then the seed 000 Table 1 analogue on one scene:
 the final meshing of the exact solve re-gathered with 16, 36 and 64 jittered rays per form factor, time and
 error against the exact solution (mean relative error at the vertices brighter than one JND, share of vertices
 whose Ward display value differs by more than the JND). Paper figures (195 MHz R10000): Desk 4 min, Many
@@ -46,6 +47,7 @@ def solve_scene(name: str, max_iterations: int) -> tuple[dict, Solver]:
         "links": stats["links"],
         "leaf_triangles": stats["leaf_triangles"],
         "discontinuities": stats["discontinuities_inserted"],
+        "indirect_disc": stats["discontinuities_indirect"],
         "peak_MiB": peak_memory_bytes() / 2**20,
         "paper_s": PAPER_SECONDS.get(name, ""),
     }
