@@ -273,7 +273,8 @@ class Solver:
             for polygon, piece, segment in inserted:
                 self._inserted_events.add((polygon, piece))
                 events = self._events[polygon]
-                if not self._emitters[events.emitter[events.group == piece]].all():
+                # a piece where an emitter's trace and a reflector's coincide (a contact line) is a direct event
+                if not self._emitters[events.emitter[events.group == piece]].any():
                     self._indirect_inserted.add((polygon, piece))
                 self.discontinuities.setdefault(polygon, []).append(segment)
         self.iterations += 1
