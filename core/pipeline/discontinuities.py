@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..formfactor import disk_ff_estimate
 from .perception import LUMINANCE_WEIGHTS
@@ -86,32 +87,12 @@ def merge_collinear(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.nd
     """Merge segments (M, 2, 3) lying on one line and overlapping or touching (within tol) into single pieces.
 
     Returns (pieces (G, 2, 3) float64, group (M,) int64 the piece holding each segment)."""
-    count = len(segments)
-    parent = np.arange(count)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    segments = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 2, 3)
     starts = segments[:, 0]
     directions = segments[:, 1] - starts
     lengths = np.linalg.norm(directions, axis=1)
     units = directions / np.where(lengths > 0.0, lengths, 1.0)[:, None]
-    for i in range(count):
-        others = np.arange(i + 1, count)
-        if not len(others):
-            break
-        ends = segments[others]
-        offsets = ends - starts[i]
-        along = offsets @ units[i]
-        across = np.linalg.norm(offsets - along[..., None] * units[i], axis=2)
-        on_line = (across <= tol).all(axis=1)
-        overlap = (along.max(axis=1) >= -tol) & (along.min(axis=1) <= lengths[i] + tol)
-        for j in others[on_line & overlap]:
-            parent[root(int(j))] = root(i)
-    roots = np.array([root(i) for i in range(count)])
+    roots = _collinear_roots(segments, units, lengths, float(tol))
     _, group = np.unique(roots, return_inverse=True)
     pieces = np.empty((group.max() + 1, 2, 3))
     for g in range(len(pieces)):
@@ -121,6 +102,47 @@ def merge_collinear(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.nd
         along = (points - starts[first]) @ units[first]
         pieces[g] = points[[np.argmin(along), np.argmax(along)]]
     return pieces, group.astype(np.int64)
+
+
+@njit(cache=True)
+def _root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def _collinear_roots(segments, units, lengths, tol):
+    """(M,) int64 the union-find root of each segment, segments j > i joined to i when both ends of j lie within
+    tol of i's line and j's extent along it meets [-tol, length_i + tol] (every pair of a receiver's traces is
+    compared: thousands of them, hence a kernel)."""
+    count = len(segments)
+    parent = np.arange(count)
+    for i in range(count):
+        sx, sy, sz = segments[i, 0, 0], segments[i, 0, 1], segments[i, 0, 2]
+        ux, uy, uz = units[i, 0], units[i, 1], units[i, 2]
+        for j in range(i + 1, count):
+            low = np.inf
+            high = -np.inf
+            on_line = True
+            for end in range(2):
+                ox = segments[j, end, 0] - sx
+                oy = segments[j, end, 1] - sy
+                oz = segments[j, end, 2] - sz
+                along = ox * ux + oy * uy + oz * uz
+                cx, cy, cz = ox - along * ux, oy - along * uy, oz - along * uz
+                if np.sqrt(cx * cx + cy * cy + cz * cz) > tol:
+                    on_line = False
+                    break
+                low = min(low, along)
+                high = max(high, along)
+            if on_line and high >= -tol and low <= lengths[i] + tol:
+                parent[_root(parent, j)] = _root(parent, i)
+    roots = np.empty(count, dtype=np.int64)
+    for i in range(count):
+        roots[i] = _root(parent, i)
+    return roots
 
 
 def event_variation(events: ReceiverEvents, which, scene, receiver: int, radiated, receiver_size) -> np.ndarray:

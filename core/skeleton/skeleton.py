@@ -269,8 +269,9 @@ class Skeleton:
         offset = scene.plane_offsets[receiver]
         pieces = []
         generators = []
+        dangling = self.arcs.dangling
         for arc in self._pair(a, b):
-            if self.arcs.dangling[arc]:
+            if dangling[arc]:
                 continue
             codes = self.arcs.codes[arc]
             if any(

@@ -3,10 +3,11 @@ into a receiver lie on the analytic visual events and the leaves follow them; th
 with naive references."""
 
 import numpy as np
+import pytest
 
 from bench.scenes import SCENES
 from core.pipeline import Settings, Solver
-from core.pipeline.discontinuities import clip_to_convex, crossing
+from core.pipeline.discontinuities import clip_to_convex, crossing, merge_collinear
 from core.visibility import exact_form_factors
 from tests.core.naive_skeleton import analytic_event_segments, face_plane_traces, uncovered
 from tests.core.skeleton_scenes import box_over_floor_scene
@@ -309,3 +310,53 @@ def test_the_indirect_bedroom_meshes_indirect_shadows_on_surfaces_the_lamp_canno
           f"from the reflectors {solver.indirect_sources.tolist()}; on polygons without direct light: {unlit}")
     assert stats["discontinuities_indirect"] > 0
     assert sum(unlit.values()) >= 20
+
+
+def _naive_collinear_groups(segments, tol):
+    """Connected components of 'j lies on i's line and their extents meet', by plain loops and a search."""
+    count = len(segments)
+    joined = [[] for _ in range(count)]
+    for i in range(count):
+        a, b = segments[i]
+        unit = (b - a) / max(np.linalg.norm(b - a), 1e-300)
+        for j in range(count):
+            if i == j:
+                continue
+            along = [float((end - a) @ unit) for end in segments[j]]
+            if all(np.linalg.norm(end - a - t * unit) <= tol for end, t in zip(segments[j], along, strict=True)):
+                if max(along) >= -tol and min(along) <= np.linalg.norm(b - a) + tol:
+                    joined[i].append(j)
+                    joined[j].append(i)
+    label = [-1] * count
+    for start in range(count):
+        if label[start] < 0:
+            label[start] = start
+            frontier = [start]
+            while frontier:
+                k = frontier.pop()
+                for m in joined[k]:
+                    if label[m] < 0:
+                        label[m] = start
+                        frontier.append(m)
+    return label
+
+
+def test_merging_collinear_traces_agrees_with_a_naive_grouping():
+    rng = np.random.default_rng(8)
+    for _ in range(10):
+        segments = []
+        for _ in range(rng.integers(1, 8)):
+            point, direction = rng.uniform(-1.0, 1.0, 3), rng.normal(size=3)
+            direction /= np.linalg.norm(direction)
+            for _ in range(rng.integers(1, 6)):
+                low, high = np.sort(rng.uniform(-1.0, 1.0, 2))
+                segments.append([point + low * direction, point + high * direction])
+        segments = np.array(segments)[rng.permutation(len(segments))]
+        pieces, group = merge_collinear(segments, 1e-9)
+        label = _naive_collinear_groups(segments, 1e-9)
+        same = group[:, None] == group[None, :]
+        assert np.array_equal(same, np.equal.outer(label, label))
+        for g, piece in enumerate(pieces):
+            ends = segments[group == g].reshape(-1, 3)
+            span = np.linalg.norm(piece[1] - piece[0])
+            assert span == pytest.approx(max(np.linalg.norm(p - q) for p in ends for q in ends), rel=1e-12)
