@@ -102,6 +102,7 @@ def test_batch_statistics(baked):
         "max_bounces": 2,
         "form_factors": "exact",
         "discontinuities": True,
+        "source_refinement": False,
     }
     seconds = stats["seconds"]
     assert set(seconds["stages"]) == {"build_skeleton", "coarse_lighting", "refine"}
