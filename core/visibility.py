@@ -77,7 +77,8 @@ def exact_form_factors(scene: Scene, points, normals, source: int, blockers=None
     allowed = _allowed_mask(scene, blockers)
     tree = bvh if bvh is not None else scene_bvh(scene)
     arrays = _scene_arrays(scene, allowed, source)
-    return _form_factors(pts, nrm, source, allowed, *arrays, *tree.arrays, scene.tol.length)
+    sources = np.full(len(pts), source, dtype=np.int64)
+    return _pair_form_factors(pts, nrm, sources, allowed, *arrays, *tree.arrays, scene.tol.length)
 
 
 def exact_pair_form_factors(scene: Scene, points, normals, sources, bvh=None) -> np.ndarray:
@@ -270,22 +271,6 @@ def _complete_solids(scene: Scene, allowed, source: int) -> np.ndarray:
     incomplete = np.zeros(int(scene.object_ids.max()) + 1, dtype=np.bool_)
     incomplete[scene.object_ids[~present]] = True
     return scene.solid & ~incomplete[scene.object_ids]
-
-
-@njit(cache=True, parallel=True)
-def _form_factors(
-    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
-    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
-):
-    count = len(points)
-    result = np.empty(count)
-    for i in prange(count):
-        pieces_xy, _, frame = _point_view(
-            points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
-            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
-        )
-        result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
-    return result
 
 
 @njit(cache=True)
