@@ -464,8 +464,9 @@ def _keep_positive(points, labels, side, cut_polygon, cut_edge):
     (cut_polygon, cut_edge). Returns the kept corners and their labels (possibly fewer than 3 corners).
     """
     k = len(points)
-    out = np.empty((k + 1, points.shape[1]))
-    out_labels = np.empty((k + 1, 2), dtype=np.int64)
+    # room for a crossing at every edge: rounding can make the signs of a convex polygon change more than twice
+    out = np.empty((2 * k, points.shape[1]))
+    out_labels = np.empty((2 * k, 2), dtype=np.int64)
     count = 0
     for i in range(k):
         j = (i + 1) % k
@@ -492,12 +493,17 @@ def _keep_positive(points, labels, side, cut_polygon, cut_edge):
 
 
 @njit(cache=True)
-def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
-    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0 (see _keep_positive)."""
+def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge, eps):
+    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0 (see _keep_positive).
+
+    Corners within eps of the plane count as on it: a blocker sharing an edge with the plane (a box face
+    meeting the source at its edge, seen along the pyramid's side) must not be cut along rounding noise.
+    """
     side = np.empty(len(polygon))
     for i in range(len(polygon)):
         p = polygon[i]
-        side[i] = plane_normal[0] * p[0] + plane_normal[1] * p[1] + plane_normal[2] * p[2] + plane_offset
+        value = plane_normal[0] * p[0] + plane_normal[1] * p[1] + plane_normal[2] * p[2] + plane_offset
+        side[i] = 0.0 if abs(value) <= eps else value
     return _keep_positive(polygon, labels, side, cut_polygon, cut_edge)
 
 
@@ -728,7 +734,7 @@ def _point_view(
     labels = _own_edges(source, len(source_polygon))
     plane_n = normal.copy()
     plane_c = -(normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2])
-    visible3, side_labels = _clip3(source_polygon, labels, plane_n, plane_c, HORIZON, 0)
+    visible3, side_labels = _clip3(source_polygon, labels, plane_n, plane_c, HORIZON, 0, eps)
     if len(visible3) < 3:
         return _empty_pieces(frame)
 
@@ -926,11 +932,12 @@ def _project_blocker(
     labels = _own_edges(blocker, len(polygon))
     clipped = polygon.copy()
     for j in range(len(side_normals)):
-        clipped, labels = _clip3(clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0],
-                                 side_labels[j, 1])
+        clipped, labels = _clip3(
+            clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0], side_labels[j, 1], eps2 * radius
+        )
         if len(clipped) < 3:
             return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
-    clipped, labels = _clip3(clipped, labels, source_normal, source_offset, blocker, FACE_CROSSING)
+    clipped, labels = _clip3(clipped, labels, source_normal, source_offset, blocker, FACE_CROSSING, eps2 * radius)
     if len(clipped) < 3:
         return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
     xy = np.empty((len(clipped), 2))

@@ -59,16 +59,6 @@ DEGENERATE = pytest.mark.xfail(
     "those queries are refused, see test_answered_form_factors_are_exact_in_degenerate_scenes",
 )
 
-ORACLE = pytest.mark.xfail(
-    strict=True,
-    reason="exact_form_factors, not the skeleton: at vertex 55 of generic room 2 it gives 7.7e-4 (receiver 37) "
-    "and 1.3e-4 (receiver 42) for source 28, a face of a closed box whose plane has the vertex 0.23 m behind it "
-    "(its back side faces the vertex from inside the box, so the exact value is 0, as the skeleton says and "
-    "test_faces_seen_from_behind_are_hidden checks); its projections of the box's faces 26 and 30 from there "
-    "cover too little of the source",
-)
-
-
 @cache
 def _scene(name: str) -> Scene:
     return SCENES[name]()
@@ -204,7 +194,7 @@ def test_no_dangling_arc_in_closed_rooms(name):
         "box over floor",
         "generic room 0",
         "generic room 1",
-        pytest.param("generic room 2", marks=ORACLE),
+        "generic room 2",
         *BOX_ROOMS,
         pytest.param("lamp table", marks=DEGENERATE),
         pytest.param("furnished room 0", marks=DEGENERATE),
@@ -247,8 +237,8 @@ def test_faces_seen_from_behind_are_hidden(name):
     """A face of a closed convex object is invisible from any point strictly behind its plane (outside the
     object): the segment to a point of the face arrives from its back side, inside the object, so it crossed
     the object's surface before. The skeleton gives exactly 0 for every such (vertex, face, receiver) of the
-    generic rooms -- among them vertex 55, source 28 of generic room 2, where exact_form_factors does not
-    (see ORACLE)."""
+    generic rooms -- among them vertex 55, source 28 of generic room 2, where exact_form_factors once did not
+    (test_visibility.py::test_faces_of_a_turned_box_seen_through_the_box_are_hidden)."""
     scene, skeleton = _scene(name), _skeleton(name)
     margin = 1e-6 * scene.diagonal
     vertices, receivers = _vertex_receivers(scene)
