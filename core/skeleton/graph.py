@@ -19,19 +19,24 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from .validation import END_PLANAR
+
 
 @dataclass(frozen=True, eq=False)
 class Arcs:
     """A arcs. kind (A,) int8 ARC_*; codes (A, 3) int64 generators in canonical line order (vertex v -> v,
     edge e -> V + e, -1 padded); end (A, 2) int64 face groups beyond the first / last generator (END_*);
     node (A, 2) int64 the start and end node (-1: dangling); s (A, 2) float64 their coordinates on the arc's
-    parameter edge (its lowest edge generator), start < end."""
+    parameter edge (its lowest edge generator), start < end; ends (A, 2, 2) int64 the end face groups as
+    found at the start node and at the end node (they differ where the lines end exactly on a blocker's edge;
+    `end` is the first)."""
 
     kind: np.ndarray
     codes: np.ndarray
     end: np.ndarray
     node: np.ndarray
     s: np.ndarray
+    ends: np.ndarray
 
     def __len__(self) -> int:
         return len(self.kind)
@@ -68,33 +73,62 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     return lowest[labels]
 
 
-def assemble_arcs(kind, codes, end, s, direction, node) -> Arcs:
+def assemble_arcs(kind, codes, end, s, direction, node, s_tol) -> Arcs:
     """Pair the incidences (M,) (see core.skeleton.validation.IncidenceChunk; node: global node ids, coincident
-    nodes already merged) into arcs. An incidence repeated by merged nodes counts once."""
+    nodes already merged) into arcs. An incidence repeated by merged nodes counts once.
+
+    An arc is keyed by its generators alone: through a point of its parameter edge there is one line meeting
+    the others, so two arcs with the same generators never overlap, and consecutive nodes along the edge bound
+    one arc even where they disagree about the face its lines end on (a line ending exactly on a blocker's
+    edge: either face at that edge, decided by rounding at each node). Coordinates closer than s_tol (M,)
+    (the tolerance length over the parameter edge's length) are one point, where ends come before starts: an
+    arc of zero length is not invented and merged nodes meeting one arc from both sides pair up."""
     if len(kind):
-        rows = np.column_stack([kind, codes, end, node, direction]).astype(np.int64)
+        rows = np.column_stack([kind, codes, node, direction]).astype(np.int64)
         _, first = np.unique(rows, axis=0, return_index=True)
         first = np.sort(first)
-        kind, codes, end, s, direction, node = (a[first] for a in (kind, codes, end, s, direction, node))
+        kind, codes, end, s, direction, node, s_tol = (a[first] for a in (kind, codes, end, s, direction, node, s_tol))
     if len(kind) == 0:
         return Arcs(
             np.empty(0, np.int8), np.empty((0, 3), np.int64), np.empty((0, 2), np.int64),
-            np.empty((0, 2), np.int64), np.empty((0, 2)),
+            np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2, 2), np.int64),
         )  # fmt: skip
-    # ends (-1) before starts (+1) at one coordinate: an arc of zero length is not invented
-    order = np.lexsort((direction, s, end[:, 1], end[:, 0], codes[:, 2], codes[:, 1], codes[:, 0], kind))
+    order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind))
     key_kind = kind[order]
     key_codes = codes[order]
-    key_end = end[order]
     new_key = np.ones(len(order), dtype=np.bool_)
-    new_key[1:] = (
-        (key_kind[1:] != key_kind[:-1])
-        | (key_codes[1:] != key_codes[:-1]).any(axis=1)
-        | (key_end[1:] != key_end[:-1]).any(axis=1)
-    )
-    pair_node, pair_s, pair_row = _pair(new_key, direction[order], s[order], node[order])
+    new_key[1:] = (key_kind[1:] != key_kind[:-1]) | (key_codes[1:] != key_codes[:-1]).any(axis=1)
+    order = order[_ends_first(new_key, s[order], s_tol[order], direction[order])]
+    pair_node, pair_s, pair_row, pair_other = _pair(new_key, direction[order], s[order], node[order])
     rows = order[pair_row]
-    return Arcs(kind[rows], codes[rows], end[rows], pair_node, pair_s)
+    ends = np.stack([end[rows], end[order[pair_other]]], axis=1)
+    ends[pair_other < 0, 1] = ends[pair_other < 0, 0]
+    # lines lying in a face's plane at one node lie in it all along the arc (a plane holds the whole swath
+    # or meets it in one line, a node): a node whose end line pokes past that face reports where it ends
+    planar = (ends == END_PLANAR).any(axis=1)
+    ends[np.repeat(planar[:, None, :], 2, axis=1)] = END_PLANAR
+    return Arcs(kind[rows], codes[rows], ends[:, 0], pair_node, pair_s, ends)
+
+
+@njit(cache=True)
+def _ends_first(new_key, s, s_tol, direction):
+    """Permutation of incidences sorted by key then s: within each run of coordinates closer than s_tol to
+    the run's first, the ends (direction -1) come before the starts."""
+    m = len(new_key)
+    result = np.arange(m)
+    i = 0
+    while i < m:
+        j = i + 1
+        while j < m and not new_key[j] and s[j] - s[i] <= max(s_tol[i], s_tol[j]):
+            j += 1
+        k = i
+        for kept in (-1, 1):
+            for r in range(i, j):
+                if direction[r] == kept:
+                    result[k] = r
+                    k += 1
+        i = j
+    return result
 
 
 @njit(cache=True)
@@ -103,6 +137,7 @@ def _pair(new_key, direction, s, node):
     out_node = np.full((m, 2), -1, dtype=np.int64)
     out_s = np.full((m, 2), np.nan)
     out_row = np.empty(m, dtype=np.int64)
+    out_other = np.full(m, -1, dtype=np.int64)
     count = 0
     pending = -1
     for i in range(m):
@@ -126,6 +161,7 @@ def _pair(new_key, direction, s, node):
                 out_node[count, 1] = node[i]
                 out_s[count, 1] = s[i]
                 out_row[count] = pending
+                out_other[count] = i
                 pending = -1
             else:
                 out_node[count, 1] = node[i]
@@ -137,4 +173,4 @@ def _pair(new_key, direction, s, node):
         out_s[count, 0] = s[pending]
         out_row[count] = pending
         count += 1
-    return out_node[:count], out_s[:count], out_row[:count]
+    return out_node[:count], out_s[:count], out_row[:count], out_other[:count]

@@ -145,7 +145,7 @@ class Skeleton:
         self.node_line = coincident_nodes(self.nodes.start, self.nodes.direction, scene.diagonal, scene.tol.length)
         self.arcs = assemble_arcs(
             incidences.kind, incidences.codes, incidences.end, incidences.s, incidences.direction,
-            self.node_line[incidences.node],
+            self.node_line[incidences.node], _parameter_tolerance(scene, incidences.codes),
         )  # fmt: skip
         self._index()
 
@@ -159,7 +159,7 @@ class Skeleton:
         self._vertex_offsets = np.zeros(n_vertices + 1, dtype=np.int64)
         self._vertex_offsets[1:] = np.cumsum(np.bincount(ev_vertex, minlength=n_vertices))
         first, second, arc = _touch_pairs(
-            arcs.kind, arcs.codes, arcs.end, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
+            arcs.kind, arcs.codes, arcs.ends, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
             scene.edge_face_offsets, scene.edge_faces, topo.face_group,
         )  # fmt: skip
         order = np.lexsort((arc, second, first))
@@ -379,10 +379,13 @@ class Skeleton:
             return []
         candidates = self._vertex_arcs[self._vertex_offsets[vertex] : self._vertex_offsets[vertex + 1]]
         edges = arcs.codes[candidates, 1] - nv
-        related = (arcs.end[candidates, 1] == group) | self._edge_touches_group(edges, group)
+        # an arc whose lines end exactly on the edge between the source and another face (its two nodes found
+        # either) ends on the source
+        ends_on_source = (arcs.ends[candidates, :, 1] == group).any(axis=1)
+        related = ends_on_source | self._edge_touches_group(edges, group)
         segments = []
-        for arc, edge in zip(candidates[related], edges[related], strict=True):
-            side = _seen_side(scene, topo, int(edge), group, apex, int(arcs.end[arc, 1]))
+        for arc, edge, on_source in zip(candidates[related], edges[related], ends_on_source[related], strict=True):
+            side = _seen_side(scene, topo, int(edge), group, apex, group if on_source else int(arcs.end[arc, 1]))
             if side == 0:
                 continue
             if arcs.dangling[arc]:
@@ -465,6 +468,14 @@ def _polygon_ids(scene: Scene, sources: Iterable[int]) -> np.ndarray:
     return ids
 
 
+def _parameter_tolerance(scene: Scene, codes: np.ndarray) -> np.ndarray:
+    """(M,) the tolerance length as a parameter on each arc's parameter edge (its lowest edge generator)."""
+    nv = scene.n_vertices
+    param = np.where(codes >= nv, codes, np.iinfo(np.int64).max).min(axis=1) - nv
+    ends = scene.vertices[scene.edges[param]]
+    return scene.tol.length / np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+
+
 def _concatenate_nodes(parts: list[NodeChunk]) -> NodeChunk:
     if not parts:
         return NodeChunk(
@@ -500,16 +511,17 @@ def _polygons_of_groups(topology, groups: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _touch_pairs(kind, codes, end, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group):
+def _touch_pairs(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group):
     """For every arc, the (surface, surface) pairs it joins, both ways: the surfaces touched at each end are
-    the one its lines end on and those around its outer generator (the lines graze it or stop on it)."""
+    the ones its lines end on (as found at either node, ends (A, 2, 2)) and those around its outer generator
+    (the lines graze it or stop on it)."""
     count = 0
     for arc in range(kind.shape[0]):
         last = 1 if kind[arc] == ARC_EV else 2
         sizes = np.zeros(2, dtype=np.int64)
         for side in range(2):
             code = codes[arc, 0 if side == 0 else last]
-            sizes[side] = 1 + (vf_off[code + 1] - vf_off[code] if code < n_vertices else
+            sizes[side] = 2 + (vf_off[code + 1] - vf_off[code] if code < n_vertices else
                                ef_off[code - n_vertices + 1] - ef_off[code - n_vertices])
         count += 2 * sizes[0] * sizes[1]
     first = np.empty(count, dtype=np.int64)
@@ -522,8 +534,9 @@ def _touch_pairs(kind, codes, end, n_vertices, vf_off, vf_face, ef_off, ef_face,
         sizes = np.zeros(2, dtype=np.int64)
         for side in range(2):
             code = codes[arc, 0 if side == 0 else last]
-            if end[arc, side] >= 0:
-                sizes[side] = _add_unique(touched[side], sizes[side], end[arc, side])
+            for node in range(2):
+                if ends[arc, node, side] >= 0:
+                    sizes[side] = _add_unique(touched[side], sizes[side], ends[arc, node, side])
             if code < n_vertices:
                 for i in range(vf_off[code], vf_off[code + 1]):
                     sizes[side] = _add_unique(touched[side], sizes[side], face_group[vf_face[i]])

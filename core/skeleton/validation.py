@@ -289,10 +289,29 @@ def _generator_blocked(
 
 
 @njit(cache=True)
+def _meets_first(normals, areas, poly, key, best, best_key, travel):
+    """Whether a line travelling along `travel` (3,) meets polygon `poly` at position `key` before polygon
+    `best` at `best_key` (best < 0: none yet). Positions within _SIDE_EPS are one point: there the face whose
+    front the line arrives at comes first (a table top before the bottom of a box resting on it, reached from
+    its back, inside the box), then the smaller face (a picture on a wall), then the lower id."""
+    if best < 0:
+        return True
+    if abs(key - best_key) > _SIDE_EPS * (1.0 + abs(key) + abs(best_key)):
+        return key < best_key
+    front = _dot(normals[poly], travel) < 0.0
+    best_front = _dot(normals[best], travel) < 0.0
+    if front != best_front:
+        return front
+    if areas[poly] != areas[best]:
+        return areas[poly] < areas[best]
+    return poly < best
+
+
+@njit(cache=True)
 def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo, hi, delta, u, angle_tol, outward):
     """Among contacts lo..hi-1 (one point), the polygon whose inside the displaced line crosses first going
     `outward` (+1 along u, -1 against); -1 when it crosses none (grazed polygons do not count: lines sliding
-    past an edge in the plane of its face's neighbour go on). Ties (one plane): the smaller polygon covers."""
+    past an edge in the plane of its face's neighbour go on). Ties: see _meets_first."""
     best = -1
     best_shift = 0.0
     for i in range(lo, hi):
@@ -302,8 +321,7 @@ def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo
         if not hit:
             continue
         key = shift * outward
-        if best < 0 or key < best_shift or (key == best_shift and (areas[c_poly[i]] < areas[best] or (
-                areas[c_poly[i]] == areas[best] and c_poly[i] < best))):
+        if _meets_first(normals, areas, c_poly[i], key, best, best_shift, outward * u):
             best = c_poly[i]
             best_shift = key
     return best
@@ -447,18 +465,19 @@ def _relaxed_arc(
         if abs(rate) <= 1e-12:
             # the whole family stays in the face's plane (or parallel to it): it keeps grazing the face. A face
             # all generators bound is the one a horizon slides over, whose far edge is a clean end; another
-            # object's face in that plane, reaching beyond an outer generator, makes the lines graze contacts
-            # where they end on that side (see END_PLANAR); the other side may be clean (a horizon over a table
-            # top from a box standing on it)
+            # object's face in that plane, touching an outer generator and reaching beyond it (a leg's top edge
+            # under the table top), makes the lines graze contacts where they end on that side (see
+            # END_PLANAR); the other side may be clean (a horizon over a table top from a box standing on it).
+            # Such a face met further on is only grazed (lines along a row of aligned legs) and ends nothing.
             # A face bounded by the outer generator ends at it (its tolerant overlap may poke past): only faces
             # the generator does not bound count on its side
             if abs(offset) <= 1e-12:
                 for j in range(n_retained):
                     if _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
                         continue
-                    if r_group[j] == first and sl_a[k] < g_tau[first] - tol:
+                    if r_group[j] == first and sl_a[k] < g_tau[first] - tol and sl_b[k] >= g_tau[first] - tol:
                         planar[0] = True
-                    if r_group[j] == last and sl_b[k] > g_tau[last] + tol:
+                    if r_group[j] == last and sl_b[k] > g_tau[last] + tol and sl_a[k] <= g_tau[last] + tol:
                         planar[1] = True
             continue
         crossing = -offset / rate * diag
@@ -485,15 +504,19 @@ def _relaxed_arc(
                 if r_group[j] == (first if at == 0 else last):
                     if r_kind[j] == GEN_VERTEX:
                         touch[at] = True
-                    elif touch_face[at] < 0:
+                    elif _meets_first(normals, areas, sl_poly[k], 0.0, touch_face[at], 0.0, u if at == 1 else -u):
                         touch_face[at] = sl_poly[k]
             continue
         if g_tau[first] + tol < crossing < g_tau[last] - tol:
             return False, 0, 0, 0, 0.0, 0
-        if crossing <= g_tau[first] + tol and crossing > before_tau:
+        if crossing <= g_tau[first] + tol and _meets_first(
+            normals, areas, sl_poly[k], -crossing / diag, before_poly, -before_tau / diag, -u
+        ):
             before_tau = crossing
             before_poly = sl_poly[k]
-        if crossing >= g_tau[last] - tol and crossing < after_tau:
+        if crossing >= g_tau[last] - tol and _meets_first(
+            normals, areas, sl_poly[k], crossing / diag, after_poly, after_tau / diag, u
+        ):
             after_tau = crossing
             after_poly = sl_poly[k]
 
@@ -554,9 +577,16 @@ def _relaxed_arc(
                 if ahead > _SIDE_EPS:
                     return False, 0, 0, 0, 0.0, 0
                 # the lines cross this face just beyond the edge, or at it (the edge lies on the face: objects
-                # in contact): it ends them, as it does at the arc's other node (one key for both ends)
+                # in contact): it ends them, as it does at the arc's other node (one key for both ends). Only
+                # its inside: lines grazing its side (sliding over a face of the edge to its corner) go on
+                inside, _ = _displaced_hit(
+                    points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol, -_SIDE_EPS
+                )
+                if not inside:
+                    continue
                 beyond = max(-ahead, 0.0)
-                if beyond < nearest or (beyond == nearest and areas[c_poly[i]] < areas[behind[side]]):
+                travel = u if g == last else -u
+                if _meets_first(normals, areas, c_poly[i], beyond, behind[side], nearest, travel):
                     nearest = beyond
                     behind[side] = c_poly[i]
         else:

@@ -172,7 +172,7 @@ def test_view_arcs_have_both_end_nodes(name):
     assert (arcs.node[ev] < len(skeleton.nodes)).all()
 
 
-@pytest.mark.parametrize("name", ["generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS])
+@pytest.mark.parametrize("name", ["generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS, "box on box"])
 def test_no_dangling_arc_in_closed_rooms(name):
     """Every arc, EV and EEE, has both end nodes: EEE swaths turning into a face's plane end at its FEE / EFE
     nodes (seed 003, appendix 7.1)."""
