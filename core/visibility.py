@@ -78,15 +78,21 @@ def exact_form_factors(scene: Scene, points, normals, source: int, blockers=None
     tree = bvh if bvh is not None else scene_bvh(scene)
     arrays = _scene_arrays(scene, allowed, source)
     sources = np.full(len(pts), source, dtype=np.int64)
-    return _pair_form_factors(pts, nrm, sources, allowed, *arrays, *tree.arrays, scene.tol.length)
+    return _pair_form_factors(
+        pts, nrm, sources, allowed, *arrays, *tree.arrays, scene.tol.length, *_bvh_for_every_point(len(pts))
+    )
 
 
-def exact_pair_form_factors(scene: Scene, points, normals, sources, bvh=None) -> np.ndarray:
+def exact_pair_form_factors(scene: Scene, points, normals, sources, bvh=None, shafts=None) -> np.ndarray:
     """Exact occluded form factors of N (point, source) pairs, every polygon of the scene a potential blocker:
     exact_form_factors for many sources at once, in one parallel call (the threads are woken once, not once per
     source, and the costly pairs of large sources are shared out among them).
 
     points, normals: (N, 3) float64 as for exact_form_factors; sources: (N,) int64 polygon indices.
+    shafts: optional (shaft_of_point (N,) int64, ShaftBlockers): the blocker candidates of point i are the
+    polygons of shaft shaft_of_point[i] (built by shaft_blockers for the point's polygon and its source;
+    seed 000 section 5.3: a new vertex's view from the blocker list of its polygon-polygon link, and from no
+    blocker at all when the list is empty, the full-visibility case), or the BVH's where it is -1.
     Returns (N,) float64 in [0, 1], element i equal to exact_form_factors(scene, points[i:i + 1],
     normals[i:i + 1], sources[i])[0].
     """
@@ -96,12 +102,63 @@ def exact_pair_form_factors(scene: Scene, points, normals, sources, bvh=None) ->
         raise SceneError(f"sources must have one entry per point ({len(pts)}), got {len(ids)}")
     if len(ids) and (ids.min() < 0 or ids.max() >= scene.n_polygons):
         _check_source(scene, int(ids[(ids < 0) | (ids >= scene.n_polygons)][0]))
+    if shafts is None:
+        listed = _bvh_for_every_point(len(pts))
+    else:
+        shaft_of_point = np.asarray(shafts[0], dtype=np.int64).reshape(-1)
+        lists = shafts[1]
+        if len(shaft_of_point) != len(pts):
+            raise SceneError(f"shafts must name one shaft per point ({len(pts)}), got {len(shaft_of_point)}")
+        if len(shaft_of_point) and (shaft_of_point.min() < -1 or shaft_of_point.max() >= len(lists)):
+            raise SceneError(f"shafts name shafts outside 0..{len(lists) - 1}")
+        listed = (shaft_of_point, lists.offsets, lists.ids)
     allowed = _allowed_mask(scene, None)
     tree = bvh if bvh is not None else scene_bvh(scene)
     # with every polygon blocking, every object is complete whichever the source: the solids are the same
     arrays = _scene_arrays(scene, allowed, 0)
     with parallel_chunksize(_PAIRS_PER_TASK):
-        return _pair_form_factors(pts, nrm, ids, allowed, *arrays, *tree.arrays, scene.tol.length)
+        return _pair_form_factors(pts, nrm, ids, allowed, *arrays, *tree.arrays, scene.tol.length, *listed)
+
+
+@dataclass(frozen=True)
+class ShaftBlockers:
+    """Blocker candidates of M (receiver polygon, source polygon) pairs: pair k's are
+    ids[offsets[k]:offsets[k + 1]]. offsets (M + 1,) int64, ids (L,) int64."""
+
+    offsets: np.ndarray
+    ids: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def blockers(self, pair: int) -> np.ndarray:
+        return self.ids[self.offsets[pair] : self.offsets[pair + 1]]
+
+
+def shaft_blockers(scene: Scene, receivers, sources, bvh=None) -> ShaftBlockers:
+    """The polygons that may hide part of each source polygon from some point of its receiver polygon.
+
+    receivers, sources: (M,) int64 polygon pairs. A polygon is listed when it may reach inside the convex hull
+    of the two polygons (every segment from a receiver point to a source point lies in it) farther than
+    tol.length from its boundary -- the test is conservative: a listed polygon may miss the hull -- or when it
+    lies in the source's plane (it may cover part of the source, see _covers). A polygon touching the hull only
+    at its boundary (a wall meeting floor and ceiling) can block only a set of directions without solid angle.
+    Pairs of coplanar polygons get every polygon of the BVH's culling.
+    """
+    receivers = np.asarray(receivers, dtype=np.int64).reshape(-1)
+    sources = np.asarray(sources, dtype=np.int64).reshape(-1)
+    if len(receivers) != len(sources):
+        raise SceneError(f"receivers ({len(receivers)}) and sources ({len(sources)}) must pair up")
+    for name, ids in (("receiver", receivers), ("source", sources)):
+        bad = ids[(ids < 0) | (ids >= scene.n_polygons)]
+        if len(bad):
+            raise SceneError(f"{name} {int(bad[0])} is not a polygon of the scene (0..{scene.n_polygons - 1})")
+    tree = bvh if bvh is not None else scene_bvh(scene)
+    offsets, ids = _shaft_blockers(
+        receivers, sources, scene.polygon_offsets, scene.polygon_points, scene.normals, scene.plane_offsets,
+        *tree.arrays, scene.tol.length,
+    )
+    return ShaftBlockers(offsets, ids)
 
 
 def exact_cut_form_factors(scene: Scene, points, normals, source: int, subdivision, variation, limits, bvh=None):
@@ -148,7 +205,8 @@ def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None
     allowed = _allowed_mask(scene, blockers)
     tree = bvh if bvh is not None else scene_bvh(scene)
     pieces_xy, pieces_gen, frame = _point_view(
-        pts[0], nrm[0], source, allowed, *_scene_arrays(scene, allowed, source), *tree.arrays, scene.tol.length
+        pts[0], nrm[0], source, allowed, *_scene_arrays(scene, allowed, source), *tree.arrays, scene.tol.length,
+        _NOTHING_LISTED, False,
     )
     origin, u, v, scale = frame[0], frame[1], frame[2], frame[3][0]
     pieces = [origin + scale * (xy[:, :1] * u + xy[:, 1:2] * v) for xy in pieces_xy]
@@ -242,6 +300,120 @@ def _allowed_mask(scene: Scene, blockers) -> np.ndarray:
 _BVH_OF_SCENE: dict[int, tuple] = {}
 
 
+def _bvh_for_every_point(count: int):
+    """The shaft arguments of _pair_form_factors that send every one of `count` points to the BVH."""
+    return np.full(count, -1, dtype=np.int64), np.zeros(2, dtype=np.int64), _NOTHING_LISTED
+
+
+_NOTHING_LISTED = np.empty(0, dtype=np.int64)
+
+
+@njit(cache=True)
+def _shaft_blockers(
+    receivers, sources, offsets, corners, poly_normals, plane_offsets,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+):
+    count = len(receivers)
+    out_offsets = np.zeros(count + 1, dtype=np.int64)
+    out_ids = np.empty(max(16, 4 * count), dtype=np.int64)
+    found_ids = np.empty(len(order), dtype=np.int64)
+    total = 0
+    for k in range(count):
+        receiver = receivers[k]
+        source = sources[k]
+        a = corners[offsets[receiver] : offsets[receiver + 1]]
+        b = corners[offsets[source] : offsets[source + 1]]
+        hull = np.concatenate((a, b))
+        planes = _hull_planes(hull, eps)
+        found = bvh_collect_in_planes(
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, planes, eps, found_ids
+        )
+        if total + found > len(out_ids):
+            out_ids = np.concatenate((out_ids, np.empty(max(total + found, 2 * len(out_ids)), dtype=np.int64)))
+        for index in range(found):
+            candidate = found_ids[index]
+            if candidate == receiver or candidate == source:
+                continue
+            polygon = corners[offsets[candidate] : offsets[candidate + 1]]
+            if len(planes) == 0 or _lies_in_plane(polygon, poly_normals[source], plane_offsets[source], eps):
+                out_ids[total] = candidate
+                total += 1
+            elif not _separated(polygon, poly_normals[candidate], plane_offsets[candidate], hull, planes, eps):
+                out_ids[total] = candidate
+                total += 1
+        out_offsets[k + 1] = total
+    return out_offsets, out_ids[:total].copy()
+
+
+@njit(cache=True)
+def _hull_planes(points, eps):
+    """(K, 4) planes (n, d), n unit, of the faces of the convex hull of points (N, 3): n . x + d <= 0 inside.
+
+    Every plane through three of the points with all of them on one side (within eps) is a face plane; points
+    with no such plane (all within eps of one plane or line) give K = 0.
+    """
+    n = len(points)
+    planes = np.empty((n * (n - 1) * (n - 2) // 6, 4))
+    found = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                normal = np.cross(points[j] - points[i], points[k] - points[i])
+                length = np.sqrt((normal * normal).sum())
+                if length == 0.0:
+                    continue
+                normal /= length
+                d = -(normal * points[i]).sum()
+                highest = -np.inf
+                lowest = np.inf
+                for m in range(n):
+                    h = (normal * points[m]).sum() + d
+                    highest = max(highest, h)
+                    lowest = min(lowest, h)
+                if highest - lowest <= eps:
+                    continue  # the points are flat: no solid hull
+                if highest <= eps:
+                    planes[found, :3] = normal
+                    planes[found, 3] = d
+                    found += 1
+                elif lowest >= -eps:
+                    planes[found, :3] = -normal
+                    planes[found, 3] = -d
+                    found += 1
+    return planes[:found]
+
+
+@njit(cache=True)
+def _lies_in_plane(polygon, normal, offset, eps):
+    for j in range(len(polygon)):
+        if abs((normal * polygon[j]).sum() + offset) > eps:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _separated(polygon, normal, offset, hull, planes, eps):
+    """Whether a convex polygon stays out of the hull's interior shrunk by eps: all its corners on or outside
+    one face plane, or all the hull's points on one side of (or within eps of) the polygon's plane."""
+    for p in range(len(planes)):
+        outside = True
+        for j in range(len(polygon)):
+            if (planes[p, :3] * polygon[j]).sum() + planes[p, 3] < -eps:
+                outside = False
+                break
+        if outside:
+            return True
+    above = True
+    below = True
+    for m in range(len(hull)):
+        h = (normal * hull[m]).sum() + offset
+        if h < -eps:
+            above = False
+        if h > eps:
+            below = False
+    return above or below
+
+
 def scene_bvh(scene: Scene):
     """The BVH over the scene's polygons, built once per scene and kept for the last scene asked."""
     cached = _BVH_OF_SCENE.get(id(scene))
@@ -285,10 +457,11 @@ def _cut_form_factors(
     found = 0
     window = np.empty((3, 2))
     stack = np.empty(len(triangles) + len(roots), dtype=np.int64)
+    nothing = np.empty(0, dtype=np.int64)
     for i in range(len(points)):
         pieces_xy, _, frame = _point_view(
             points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
-            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps, nothing, False,
         )
         if len(pieces_xy) == 0:
             continue
@@ -395,13 +568,19 @@ def _clip_half_plane(xy, ax, ay, bx, by):
 def _pair_form_factors(
     points, normals, sources, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+    shaft_of_point, shaft_offsets, shaft_ids,
 ):
+    """shaft_of_point (N,) int64: the shaft list (of shaft_offsets, shaft_ids) whose polygons are point i's
+    candidate blockers, -1 for the BVH."""
     count = len(points)
     result = np.empty(count)
     for i in prange(count):
+        shaft = shaft_of_point[i]
+        listed = shaft_ids[shaft_offsets[max(shaft, 0)] : shaft_offsets[max(shaft, 0) + 1]]
         pieces_xy, _, frame = _point_view(
             points[i], normals[i], sources[i], allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+            listed, shaft >= 0,
         )
         result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
     return result
@@ -465,6 +644,8 @@ def _keep_positive(points, labels, side, cut_polygon, cut_edge):
     """
     k = len(points)
     # room for a crossing at every edge: rounding can make the signs of a convex polygon change more than twice
+    # (a blocker sharing an edge with the source lies along a side of the pyramid (point, source)); the extra
+    # corners lie within rounding of the plane and _cleanup drops them
     out = np.empty((2 * k, points.shape[1]))
     out_labels = np.empty((2 * k, 2), dtype=np.int64)
     count = 0
@@ -493,17 +674,12 @@ def _keep_positive(points, labels, side, cut_polygon, cut_edge):
 
 
 @njit(cache=True)
-def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge, eps):
-    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0 (see _keep_positive).
-
-    Corners within eps of the plane count as on it: a blocker sharing an edge with the plane (a box face
-    meeting the source at its edge, seen along the pyramid's side) must not be cut along rounding noise.
-    """
+def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
+    """Keep the part of a convex (K, 3) polygon where plane_normal . x + plane_offset >= 0 (see _keep_positive)."""
     side = np.empty(len(polygon))
     for i in range(len(polygon)):
         p = polygon[i]
-        value = plane_normal[0] * p[0] + plane_normal[1] * p[1] + plane_normal[2] * p[2] + plane_offset
-        side[i] = 0.0 if abs(value) <= eps else value
+        side[i] = plane_normal[0] * p[0] + plane_normal[1] * p[1] + plane_normal[2] * p[2] + plane_offset
     return _keep_positive(polygon, labels, side, cut_polygon, cut_edge)
 
 
@@ -710,9 +886,12 @@ def _bounds(xy):
 @njit(cache=True)
 def _point_view(
     point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
-    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps, listed, use_listed,
 ):
     """Visible pieces of `source` from `point`, in the source's 2-D frame.
+
+    Candidate blockers: with use_listed, the polygons of `listed` (K,) int64 (a shaft list of the point's
+    polygon and the source, see shaft_blockers); otherwise the BVH's polygons in the pyramid.
 
     Returns (pieces_xy: list of (K, 2), pieces_labels: list of (K, 2) int64 generators, frame (4, 3): origin,
     u, v, (radius, 0, 0)); 2-D coordinates are in units of the radius.
@@ -734,7 +913,7 @@ def _point_view(
     labels = _own_edges(source, len(source_polygon))
     plane_n = normal.copy()
     plane_c = -(normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2])
-    visible3, side_labels = _clip3(source_polygon, labels, plane_n, plane_c, HORIZON, 0, eps)
+    visible3, side_labels = _clip3(source_polygon, labels, plane_n, plane_c, HORIZON, 0)
     if len(visible3) < 3:
         return _empty_pieces(frame)
 
@@ -784,10 +963,14 @@ def _point_view(
     shaft[m + 1, :3] = oriented
     shaft[m + 1, 3] = sign * plane_offsets[source] - height
 
-    candidates = np.empty(len(order), dtype=np.int64)
-    found = bvh_collect_in_planes(
-        node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, shaft, eps, candidates
-    )
+    if use_listed:
+        candidates = listed
+        found = len(listed)
+    else:
+        candidates = np.empty(len(order), dtype=np.int64)
+        found = bvh_collect_in_planes(
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, shaft, eps, candidates
+        )
     # polygons lying on the source (rugs, posters, feet standing on a floor) cut holes that break the view into
     # many pieces: they go after the blockers in front, which leave fewer pieces to cut and may hide them
     lying = np.empty(found, dtype=np.int64)
@@ -933,11 +1116,11 @@ def _project_blocker(
     clipped = polygon.copy()
     for j in range(len(side_normals)):
         clipped, labels = _clip3(
-            clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0], side_labels[j, 1], eps2 * radius
+            clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0], side_labels[j, 1]
         )
         if len(clipped) < 3:
             return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
-    clipped, labels = _clip3(clipped, labels, source_normal, source_offset, blocker, FACE_CROSSING, eps2 * radius)
+    clipped, labels = _clip3(clipped, labels, source_normal, source_offset, blocker, FACE_CROSSING)
     if len(clipped) < 3:
         return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
     xy = np.empty((len(clipped), 2))

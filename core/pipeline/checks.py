@@ -58,7 +58,7 @@ def sample_points(mesh) -> np.ndarray:
     return np.einsum("sk,tkc->tsc", SAMPLE_WEIGHTS, mesh.vertices[mesh.triangles])
 
 
-def complete_steps(checks: LeafChecks, mesh, scene, bvh, facing, settings):
+def complete_steps(checks: LeafChecks, mesh, scene, bvh, facing, settings, shafts=None):
     """Compute the sample form factors of the leaves not known yet (both sides of two-sided polygons); a
     generator yielding the fraction done and returning the completed LeafChecks.
 
@@ -77,7 +77,7 @@ def complete_steps(checks: LeafChecks, mesh, scene, bvh, facing, settings):
     parts = [checks.sampled.tocoo()]
     for start in range(0, len(leaves), _CHUNK_LEAVES):
         chunk, chunk_sides = leaves[start : start + _CHUNK_LEAVES], sides[start : start + _CHUNK_LEAVES]
-        links = _link_samples(checks, mesh, samples, chunk, chunk_sides, scene, bvh, facing, settings)
+        links = _link_samples(checks, mesh, samples, chunk, chunk_sides, scene, bvh, facing, settings, shafts)
         leaf, sample = links.point // N_SAMPLES, links.point % N_SAMPLES
         rows = (2 * chunk[leaf] + chunk_sides[leaf]) * N_SAMPLES + sample
         parts.append(sp.coo_matrix((links.form_factor, (rows, links.column)), shape=checks.sampled.shape))
@@ -93,7 +93,7 @@ def complete_steps(checks: LeafChecks, mesh, scene, bvh, facing, settings):
     return LeafChecks(checks.corners, checks.live, sampled, np.ones(len(checks.known), dtype=bool))
 
 
-def _link_samples(checks, mesh, samples, leaves, sides, scene, bvh, facing, settings) -> LinkSet:
+def _link_samples(checks, mesh, samples, leaves, sides, scene, bvh, facing, settings, shafts) -> LinkSet:
     """The links of the samples of leaves (C,) on sides (C,) to the sources live at their leaf (point: the
     sample's index c S + s), each distinct sample point linked once."""
     points = samples[leaves].reshape(-1, 3)
@@ -111,7 +111,8 @@ def _link_samples(checks, mesh, samples, leaves, sides, scene, bvh, facing, sett
     live = np.repeat(checks.live[leaves], N_SAMPLES, axis=0)
     wanted = np.logical_or.reduceat(live[by_point], starts[:-1], axis=0)
     distinct = compute_links(
-        scene, bvh, at[first], polygons[first], point_sides[first], facing, settings, wanted=wanted, evaluated=True
+        scene, bvh, at[first], polygons[first], point_sides[first], facing, settings, wanted=wanted, evaluated=True,
+        shafts=shafts,
     )
     # every link of a distinct point goes to each sample sharing it where its source is live
     count = np.diff(starts)[distinct.point]

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import VisradError
 from ..raycast import jittered_form_factors
-from ..visibility import exact_pair_form_factors
+from ..visibility import ShaftBlockers, exact_pair_form_factors, shaft_blockers
 
 FRONT = 0
 BACK = 1
@@ -109,8 +109,50 @@ def _available_memory() -> int | None:
     return None
 
 
+class PairShafts:
+    """The blocker lists of receiver-source polygon pairs (seed 000 section 5.3: the polygon-polygon links carry
+    the blocker lists from which views at new vertices are computed, and detect full visibility), each pair's
+    computed on first use (core.visibility.shaft_blockers) and kept: refinement asks for the same pairs at every
+    iteration."""
+
+    def __init__(self, scene, bvh):
+        self.scene = scene
+        self.bvh = bvh
+        self._keys = np.empty(0, dtype=np.int64)  # receiver * P + source, in the order the pairs were computed
+        self._order = np.empty(0, dtype=np.int64)  # argsort of _keys
+        self.lists = ShaftBlockers(np.zeros(1, dtype=np.int64), np.empty(0, dtype=np.int64))
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def lookup(self, receivers, sources) -> np.ndarray:
+        """(N,) int64: the index in self.lists of each (receiver, source) polygon pair, computing new pairs."""
+        count = self.scene.n_polygons
+        keys = np.asarray(receivers, dtype=np.int64) * count + np.asarray(sources, dtype=np.int64)
+        wanted = np.unique(keys)
+        known = self._find(wanted) >= 0
+        new = wanted[~known]
+        if len(new):
+            found = shaft_blockers(self.scene, new // count, new % count, self.bvh)
+            total = self.lists.offsets[-1]
+            self.lists = ShaftBlockers(
+                np.concatenate([self.lists.offsets, total + found.offsets[1:]]),
+                np.concatenate([self.lists.ids, found.ids]),
+            )
+            self._keys = np.concatenate([self._keys, new])
+            self._order = np.argsort(self._keys, kind="stable")
+        return self._find(keys)
+
+    def _find(self, keys: np.ndarray) -> np.ndarray:
+        sorted_keys = self._keys[self._order]
+        at = np.minimum(np.searchsorted(sorted_keys, keys), max(len(sorted_keys) - 1, 0))
+        if not len(sorted_keys):
+            return np.full(len(keys), -1, dtype=np.int64)
+        return np.where(sorted_keys[at] == keys, self._order[at], -1)
+
+
 def compute_links(
-    scene, bvh, points, polygons, sides, facing, settings, interior=None, wanted=None, evaluated=False
+    scene, bvh, points, polygons, sides, facing, settings, interior=None, wanted=None, evaluated=False, shafts=None
 ) -> LinkSet:
     """The links of receiver points: every source column the point can see, with its form factor.
 
@@ -119,7 +161,9 @@ def compute_links(
     centroid of a leaf triangle around it; default the polygon's centroid), the direction of the limit taken
     at points on a touching boundary; wanted (N, P) bool: the only sources to link each point with (default
     all); evaluated: the points are already where their form factors are evaluated (by _inside_limit), and
-    interior is not used. Links with a zero form factor (the source entirely hidden) are dropped.
+    interior is not used; shafts: a PairShafts whose blocker lists the exact views are computed from (default
+    the BVH's polygons in each point's pyramid; the form factors are the same). Links with a zero form factor
+    (the source entirely hidden) are dropped.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     polygons = np.asarray(polygons, dtype=np.int64)
@@ -140,7 +184,8 @@ def compute_links(
     keep = (height > eps) | ((height < -eps) & scene.two_sided[source])
     source, point, side = source[keep], point[keep], side[keep]
     if settings.exact:
-        ff = exact_pair_form_factors(scene, at[point], normals[point], source, bvh=bvh)
+        lists = None if shafts is None else (shafts.lookup(polygons[point], source), shafts.lists)
+        ff = exact_pair_form_factors(scene, at[point], normals[point], source, bvh=bvh, shafts=lists)
     else:
         ff = np.empty(len(point))
         bounds = np.searchsorted(source, np.arange(scene.n_polygons + 1))

@@ -37,7 +37,7 @@ from .checks import LeafChecks, carry, complete_steps, measure
 from .contact import contact_regions, covered_fraction, inside_regions
 from .discontinuities import ReceiverEvents, clip_to_convex, crossing, event_variation, receiver_events
 from .interpolation import locate
-from .links import BACK, FRONT, LinkSet, compute_links, facing_sources
+from .links import BACK, FRONT, LinkSet, PairShafts, compute_links, facing_sources
 from .maxima import transfer_maxima
 from .oracle import exact_transfers
 from .perception import LUMINANCE_WEIGHTS, radiosity_threshold
@@ -96,6 +96,7 @@ class Solver:
         self.progress = progress
         self.cancel = cancel
         self.bvh = None
+        self.shafts: PairShafts | None = None
         self.facing = None
         self.contacts: dict = {}
         self.hidden_polygons = np.zeros(scene.n_polygons, dtype=bool)
@@ -151,6 +152,7 @@ class Solver:
     def build_skeleton_steps(self):
         facing = facing_sources(self.scene)
         self.bvh = scene_bvh(self.scene)
+        self.shafts = PairShafts(self.scene, self.bvh)
         yield 0.05
         emitters = np.flatnonzero(self._emitters)
         skeleton = None
@@ -197,7 +199,7 @@ class Solver:
         checks = state.checks
         if checks is None:
             checks = LeafChecks.fresh(mesh.triangles, self._exact_transfers(state, mesh))
-        sampling = complete_steps(checks, mesh, self.scene, self.bvh, self.facing, self.settings)
+        sampling = complete_steps(checks, mesh, self.scene, self.bvh, self.facing, self.settings, self.shafts)
         while True:
             try:
                 yield 0.3 * next(sampling)
@@ -335,6 +337,13 @@ class Solver:
             "discontinuities_rejected": len(self._rejected_events),
             "discontinuities_available": sum(len(events.pieces) for events in self._events.values()),
         }
+        if self.shafts is not None and len(self.shafts):
+            lengths = np.diff(self.shafts.lists.offsets)
+            out["blocker_lists"] = {
+                "pairs": len(lengths),
+                "unoccluded": int(np.count_nonzero(lengths == 0)),
+                "mean_blockers": float(lengths.mean()),
+            }
         if self.skeleton is not None:
             skeleton = self.skeleton.stats
             out["skeleton"] = {key: skeleton[key] for key in ("nodes", "arcs", "seconds", "bytes")}
@@ -376,7 +385,7 @@ class Solver:
             stop = min(start + _LINK_CHUNK, len(rows))
             new = compute_links(
                 self.scene, self.bvh, positions[start:stop], polygons[start:stop], rows[start:stop] % 2,
-                self.facing, self.settings, interior[start:stop],
+                self.facing, self.settings, interior[start:stop], shafts=self.shafts,
             )  # fmt: skip
             parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
             yield stop / len(rows)
@@ -411,7 +420,7 @@ class Solver:
             stop = min(start + _LINK_CHUNK, len(rows))
             new = compute_links(
                 self.scene, self.bvh, positions[start:stop], polygons[start:stop], side[start:stop], self.facing,
-                self.settings, interior[start:stop], wanted[start:stop],
+                self.settings, interior[start:stop], wanted[start:stop], shafts=self.shafts,
             )  # fmt: skip
             parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
             yield stop / len(rows)

@@ -101,3 +101,30 @@ def oracle_form_factor(point, normal, source, blockers, within=None):
             xy = np.asarray(ring.coords)[:-1]
             rings.append(origin + xy[:, :1] * e1 + xy[:, 1:] * e2)
     return lambert_form_factor(point, normal, rings)
+
+
+def naive_shaft_blockers(scene, receiver: int, source: int) -> set:
+    """The polygons reaching more than tol.length inside the convex hull of a receiver and a source polygon
+    (scipy's Qhull for the hull, each polygon clipped by every face plane moved inward), and those lying in
+    the source's plane over part of it: what core.visibility.shaft_blockers must list at least."""
+    from scipy.spatial import ConvexHull
+
+    eps = scene.tol.length
+    corners = np.concatenate([scene.polygon(receiver), scene.polygon(source)])
+    faces = ConvexHull(corners).equations  # rows (n, d), n . x + d <= 0 inside
+    found = set()
+    for candidate in range(scene.n_polygons):
+        if candidate in (receiver, source):
+            continue
+        polygon = scene.polygon(candidate)
+        if np.all(np.abs(polygon @ scene.normals[source] + scene.plane_offsets[source]) <= eps):
+            # in the source's plane: listed when it overlaps the source (it may cover part of it)
+            keep = np.argsort(np.abs(scene.normals[source]))[:2]
+            if Polygon(polygon[:, keep]).intersection(Polygon(scene.polygon(source)[:, keep])).area > 0.0:
+                found.add(candidate)
+            continue
+        for face in faces:
+            polygon = _clip_by_plane(polygon, -face[:3], -face[3] - eps)
+        if len(polygon) >= 3:
+            found.add(candidate)
+    return found

@@ -54,3 +54,30 @@ def test_a_scene_too_large_for_the_memory_is_refused_before_allocating(monkeypat
         Solver(scene).build_skeleton()
     monkeypatch.setattr(links, "_available_memory", lambda: None)
     assert links.facing_sources(scene).shape == (scene.n_polygons, 2, scene.n_polygons)
+
+
+def test_pair_shafts_compute_each_pair_once_and_find_it_again(monkeypatch):
+    """PairShafts.lookup: every (receiver, source) gets the blocker list shaft_blockers gives that pair alone,
+    across calls that share pairs, and a pair is computed once."""
+    from core.visibility import scene_bvh, shaft_blockers
+
+    scene = _room(True)
+    shafts = links.PairShafts(scene, scene_bvh(scene))
+    computed = []
+    original = links.shaft_blockers
+
+    def counting(scene_, receivers, sources, bvh):
+        computed.extend(zip(receivers.tolist(), sources.tolist(), strict=True))
+        return original(scene_, receivers, sources, bvh)
+
+    monkeypatch.setattr(links, "shaft_blockers", counting)
+    rng = np.random.default_rng(3)
+    first = rng.integers(0, scene.n_polygons, (2, 40))
+    second = rng.integers(0, scene.n_polygons, (2, 40))
+    for receivers, sources in (first, second, np.concatenate([second, first], axis=1)):
+        found = shafts.lookup(receivers, sources)
+        for r, q, k in zip(receivers, sources, found, strict=True):
+            alone = shaft_blockers(scene, [r], [q])
+            np.testing.assert_array_equal(shafts.lists.blockers(int(k)), alone.blockers(0))
+    assert len(computed) == len(set(computed)) == len(shafts)
+    assert len(shafts) == len(set(zip(*np.concatenate([first, second], axis=1).tolist(), strict=True)))

@@ -10,6 +10,7 @@ from core.visibility import (
     exact_form_factors,
     exact_pair_form_factors,
     exact_view,
+    shaft_blockers,
 )
 from tests.core.furnished_rooms import box_quads, free_points, furnished_room
 from tests.core.naive_visibility import oracle_form_factor
@@ -385,3 +386,84 @@ def test_faces_of_a_turned_box_seen_through_the_box_are_hidden():
                 unoccluded = exact_form_factors(scene, points[behind], normals[behind], face, blockers=[])
                 checked += int((unoccluded > 1e-4).sum())
     assert checked > 50_000
+
+
+def _points_on_polygons(scene, rng, count):
+    polygons = rng.integers(0, scene.n_polygons, count)
+    points = np.empty((count, 3))
+    for i, p in enumerate(polygons):
+        weights = rng.random(len(scene.polygon(p))) ** 2
+        points[i] = weights / weights.sum() @ scene.polygon(p)
+    return points, polygons
+
+
+def test_shaft_blockers_list_every_polygon_inside_the_hull():
+    """shaft_blockers against a naive reference (Qhull's hull, plain clipping): nothing that reaches inside the
+    hull of a receiver and a source polygon is left out."""
+    from tests.core.naive_visibility import naive_shaft_blockers
+
+    scene, _, _ = room_scene(4)
+    rng = np.random.default_rng(8)
+    receivers = rng.integers(0, scene.n_polygons, 150)
+    sources = rng.integers(0, scene.n_polygons, 150)
+    solid = [
+        np.abs(scene.polygon(q) @ scene.normals[r] + scene.plane_offsets[r]).max() > 1e-6
+        for r, q in zip(receivers, sources, strict=True)
+    ]  # the pair spans a volume (coplanar pairs exchange nothing)
+    receivers, sources = receivers[solid], sources[solid]
+    lists = shaft_blockers(scene, receivers, sources)
+    assert len(lists) == len(receivers)
+    listed = extra = 0
+    for k, (r, q) in enumerate(zip(receivers, sources, strict=True)):
+        expected = naive_shaft_blockers(scene, int(r), int(q))
+        ours = set(lists.blockers(k).tolist())
+        assert expected <= ours, (r, q, expected - ours)
+        listed += len(expected)
+        extra += len(ours - expected)
+    assert listed > 500
+    # conservative, but not much more than needed
+    assert extra <= 0.25 * listed
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_views_from_shaft_lists_equal_the_views_from_the_bvh(seed):
+    """Exact form factors computed with a pair's shaft list as the only candidate blockers (the full-visibility
+    case: no blocker at all) are the form factors computed with the whole scene, at points on the polygons of a
+    furnished room (boxes on the floor, against walls and on each other) and to every source they face."""
+    scene, _, _ = room_scene(seed)
+    rng = np.random.default_rng(seed)
+    points, polygons = _points_on_polygons(scene, rng, 300)
+    heights = points @ scene.normals.T + scene.plane_offsets[None, :]
+    point, source = np.nonzero(heights > 1e-6)
+    point, source = point[polygons[point] != source], source[polygons[point] != source]
+    normals = scene.normals[polygons[point]]
+    reference = exact_pair_form_factors(scene, points[point], normals, source)
+    keys, shaft_of_point = np.unique(polygons[point] * scene.n_polygons + source, return_inverse=True)
+    lists = shaft_blockers(scene, keys // scene.n_polygons, keys % scene.n_polygons)
+    ours = exact_pair_form_factors(scene, points[point], normals, source, shafts=(shaft_of_point.ravel(), lists))
+    np.testing.assert_allclose(ours, reference, rtol=0, atol=1e-12)
+    lengths = np.diff(lists.offsets)
+    unoccluded = lengths[shaft_of_point.ravel()] == 0
+    assert unoccluded.any() and (~unoccluded).any()
+    assert (reference[~unoccluded] < 0.999 * exact_pair_form_factors(
+        scene, points[point][~unoccluded], normals[~unoccluded], source[~unoccluded],
+        shafts=(np.zeros(int((~unoccluded).sum()), dtype=np.int64), _no_blockers()),
+    )).any()
+
+
+def _no_blockers():
+    from core.visibility import ShaftBlockers
+
+    return ShaftBlockers(np.zeros(2, dtype=np.int64), np.empty(0, dtype=np.int64))
+
+
+def test_shaft_lists_are_checked():
+    scene, _, _ = room_scene(0)
+    with pytest.raises(SceneError, match="receiver 99999"):
+        shaft_blockers(scene, [99999], [0])
+    with pytest.raises(SceneError, match="pair up"):
+        shaft_blockers(scene, [0, 1], [2])
+    with pytest.raises(SceneError, match="one shaft per point"):
+        exact_pair_form_factors(scene, np.ones((2, 3)), np.ones((2, 3)), [0, 1], shafts=([0], _no_blockers()))
+    with pytest.raises(SceneError, match="outside"):
+        exact_pair_form_factors(scene, np.ones((1, 3)), np.ones((1, 3)), [0], shafts=([3], _no_blockers()))
