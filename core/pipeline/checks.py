@@ -205,3 +205,41 @@ def carry(checks: LeafChecks, mesh, exact, new_mesh, always) -> LeafChecks:
     select = sp.csr_matrix((np.ones(len(new_rows)), (new_rows, old_rows)), shape=shape)
     known = kept & checks.known[np.maximum(previous, 0)]
     return LeafChecks(new_corners, live, (select @ checks.sampled).tocsr(), known)
+
+
+def links_at_samples(checks: LeafChecks, mesh, points, sides, leaves, wanted, eps) -> tuple[np.ndarray, LinkSet]:
+    """The links of points that are samples of leaves already checked: a vertex inserted at a leaf's edge
+    midpoint or centroid needs the form factors its leaf's sample got (the same point, the same sources).
+
+    points (N, 3) float64, sides (N,) FRONT/BACK; leaves (N, 2) int64: the leaf of `mesh` holding each point
+    and the one sharing the edge it lies on (-1: none); wanted (N, P) bool: the sources each point links
+    exactly. A point is found when it lies within eps of a sample of each of its leaves, those leaves are known
+    and every wanted source is live at one of them (the sample links only live sources; a missing link is a
+    zero form factor). Returns (found (N,) bool, LinkSet with point = index into points, of the found points,
+    restricted to wanted).
+    """
+    count = len(points)
+    found = np.ones(count, dtype=bool)
+    covered = np.zeros_like(wanted)
+    rows = np.full((count, 2), -1, dtype=np.int64)
+    samples = sample_points(mesh)
+    for k in range(2):
+        leaf = leaves[:, k]
+        present = leaf >= 0
+        at = np.maximum(leaf, 0)
+        distance = np.linalg.norm(samples[at] - points[:, None, :], axis=2)
+        sample = np.argmin(distance, axis=1)
+        matched = present & (distance[np.arange(count), sample] <= eps) & checks.known[at]
+        found &= matched | ~present
+        rows[matched, k] = (2 * at[matched] + sides[matched]) * N_SAMPLES + sample[matched]
+        covered[matched] |= checks.live[at[matched]]
+    found &= ~(wanted & ~covered).any(axis=1)
+    found &= (rows >= 0).any(axis=1)
+    point = np.repeat(np.arange(count), 2)[found.repeat(2) & (rows.ravel() >= 0)]
+    picked = checks.sampled[rows.ravel()[found.repeat(2) & (rows.ravel() >= 0)]].tocoo()
+    point, column, value = point[picked.row], picked.col.astype(np.int64), picked.data
+    keep = wanted[point, column // 2]
+    point, column, value = point[keep], column[keep], value[keep]
+    # a point on a shared edge is a sample of both leaves: one link per source
+    _, first = np.unique(point * checks.sampled.shape[1] + column, return_index=True)
+    return found, LinkSet(point[first], column[first], value[first])

@@ -53,34 +53,37 @@ class ReceiverEvents:
 
 def receiver_events(skeleton, scene, receiver: int, emitters) -> ReceiverEvents:
     """The visual events of every emitter of `emitters` (int ids) on polygon `receiver`."""
-    segments, emitter, sizes, points = [], [], [], []
+    segments, emitter, sizes, codes = [], [], [], []
     diameters = _polygon_diameters(scene)
+    largest_face: dict[int, float] = {}  # generator code -> diameter of the largest polygon around it
     for source in emitters:
         if source == receiver:
             continue
         traces, generators = skeleton.discontinuity_events(int(source), receiver)
         if not len(traces):
             continue
-        own = _on_polygon(scene, skeleton, generators, int(source))
-        centre = scene.centroids[source]
-        for trace, codes, mine in zip(traces, generators, own, strict=True):
-            blocking = [int(c) for c, m in zip(codes, mine, strict=True) if c >= 0 and not m]
-            if not blocking:
-                continue
-            faces = np.unique(np.concatenate([skeleton.element_faces(c) for c in blocking]))
-            segments.append(trace)
-            emitter.append(int(source))
-            sizes.append(float(diameters[faces].max()))
-            points.append([_nearest_on_elements(scene, blocking, end, centre) for end in trace])
-    if not segments:
+        blocking = np.where(_on_polygon(scene, skeleton, generators, int(source)), -1, generators)
+        kept = (blocking >= 0).any(axis=1)
+        for code in np.unique(blocking[kept]):
+            if code >= 0 and int(code) not in largest_face:
+                largest_face[int(code)] = float(diameters[skeleton.element_faces(int(code))].max())
+        for codes_of_trace in blocking[kept]:
+            sizes.append(max(largest_face[int(c)] for c in codes_of_trace if c >= 0))
+        segments.append(traces[kept])
+        codes.append(blocking[kept])
+        emitter.append(np.full(int(kept.sum()), int(source), dtype=np.int64))
+    if not sizes:
         empty = np.empty((0, 2, 3))
         return ReceiverEvents(
             empty, np.empty(0, np.int64), np.empty(0), np.empty(0), empty, empty, np.empty(0, np.int64)
         )
-    segments = np.array(segments)
-    emitter = np.array(emitter)
+    segments = np.concatenate(segments)
+    emitter = np.concatenate(emitter)
+    points = _nearest_on_elements(
+        np.concatenate(codes), segments, scene.centroids[emitter], scene.vertices, scene.edges, scene.n_vertices
+    )
     pieces, group = merge_collinear(segments, scene.tol.snap)
-    return ReceiverEvents(segments, emitter, np.array(sizes), diameters[emitter], np.array(points), pieces, group)
+    return ReceiverEvents(segments, emitter, np.array(sizes), diameters[emitter], points, pieces, group)
 
 
 def merge_collinear(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -205,27 +208,39 @@ def clip_to_convex(segment: np.ndarray, polygon: np.ndarray, normal: np.ndarray)
 def crossing(segments_2d: np.ndarray, triangles_2d: np.ndarray, tol: float) -> np.ndarray:
     """(M, T) bool: which segments (M, 2, 2) meet which triangles (T, 3, 2), within tol (separating axes: the
     triangle's three side normals and the segment's normal)."""
-    if not len(segments_2d) or not len(triangles_2d):
-        return np.zeros((len(segments_2d), len(triangles_2d)), dtype=bool)
-    seg = segments_2d[:, None, :, :]
-    tri = triangles_2d[None, :, :, :]
-    meets = np.ones((len(segments_2d), len(triangles_2d)), dtype=bool)
-    axes = [np.roll(triangles_2d, -1, axis=1) - triangles_2d]
-    side_axes = np.stack([-axes[0][..., 1], axes[0][..., 0]], axis=-1)[None]
-    for k in range(3):
-        axis = side_axes[:, :, k]
-        meets &= ~_separated(seg @ axis[..., None], tri @ axis[..., None], tol * np.linalg.norm(axis, axis=-1))
-    direction = segments_2d[:, 1] - segments_2d[:, 0]
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=-1)[:, None, :]
-    meets &= ~_separated(seg @ normal[..., None], tri @ normal[..., None], tol * np.linalg.norm(normal, axis=-1))
+    segments_2d = np.ascontiguousarray(segments_2d, dtype=np.float64).reshape(-1, 2, 2)
+    triangles_2d = np.ascontiguousarray(triangles_2d, dtype=np.float64).reshape(-1, 3, 2)
+    return _crossing(segments_2d, triangles_2d, float(tol))
+
+
+@njit(cache=True)
+def _crossing(segments, triangles, tol):
+    meets = np.zeros((len(segments), len(triangles)), dtype=np.bool_)
+    seg = np.empty(2)
+    tri = np.empty(3)
+    for m in range(len(segments)):
+        for t in range(len(triangles)):
+            separated = False
+            for k in range(4):
+                if k < 3:
+                    a = triangles[t, k]
+                    b = triangles[t, (k + 1) % 3]
+                else:
+                    a = segments[m, 0]
+                    b = segments[m, 1]
+                # the axis normal to a -> b
+                ax = a[1] - b[1]
+                ay = b[0] - a[0]
+                for j in range(2):
+                    seg[j] = segments[m, j, 0] * ax + segments[m, j, 1] * ay
+                for j in range(3):
+                    tri[j] = triangles[t, j, 0] * ax + triangles[t, j, 1] * ay
+                margin = tol * np.sqrt(ax * ax + ay * ay)
+                if seg.max() < tri.min() - margin or tri.max() < seg.min() - margin:
+                    separated = True
+                    break
+            meets[m, t] = not separated
     return meets
-
-
-def _separated(a, b, margin) -> np.ndarray:
-    """Whether the projections a (..., 2, 1) and b (..., 3, 1) on one axis leave a gap wider than margin."""
-    a = a[..., 0]
-    b = b[..., 0]
-    return (a.max(axis=-1) < b.min(axis=-1) - margin) | (b.max(axis=-1) < a.min(axis=-1) - margin)
 
 
 def _polygon_diameters(scene) -> np.ndarray:
@@ -243,47 +258,60 @@ def _on_polygon(scene, skeleton, generators: np.ndarray, polygon: int) -> np.nda
     return out
 
 
-def _nearest_on_elements(scene, codes, point, centre) -> np.ndarray:
-    """The point of the generator elements (vertices or edges, by code) nearest the segment point -> centre."""
-    best, best_distance = None, np.inf
-    for code in codes:
-        if code < scene.n_vertices:
-            candidate = scene.vertices[code]
-        else:
-            a, b = scene.vertices[scene.edges[code - scene.n_vertices]]
-            candidate = _segment_point_nearest_segment(a, b, point, centre)
-        distance = _distance_to_segment(candidate, point, centre)
-        if distance < best_distance:
-            best, best_distance = candidate, distance
-    return best
+@njit(cache=True)
+def _nearest_on_elements(codes, segments, centres, vertices, edges, n_vertices):
+    """(M, 2, 3) for each trace and each of its ends, the point of its generator elements (codes (M, 3): vertex
+    v as v, edge e as n_vertices + e, -1 none) nearest the segment from that end to the emitter's centre."""
+    out = np.empty((len(codes), 2, 3))
+    for m in range(len(codes)):
+        for end in range(2):
+            point = segments[m, end]
+            best = np.inf
+            for k in range(codes.shape[1]):
+                code = codes[m, k]
+                if code < 0:
+                    continue
+                if code < n_vertices:
+                    candidate = vertices[code].copy()
+                else:
+                    edge = edges[code - n_vertices]
+                    candidate = _segment_point_nearest_segment(vertices[edge[0]], vertices[edge[1]], point, centres[m])
+                distance = _distance_to_segment(candidate, point, centres[m])
+                if distance < best:
+                    best = distance
+                    out[m, end] = candidate
+    return out
 
 
-def _segment_point_nearest_segment(a, b, p, q) -> np.ndarray:
+@njit(cache=True)
+def _segment_point_nearest_segment(a, b, p, q):
     """The point of segment ab nearest segment pq (closest points of two segments, clamped to both)."""
     d1 = b - a
     d2 = q - p
     r = a - p
-    aa = d1 @ d1
-    ee = d2 @ d2
+    aa = (d1 * d1).sum()
+    ee = (d2 * d2).sum()
     if aa == 0.0:
         return a.copy()
-    c = d1 @ r
+    c = (d1 * r).sum()
     if ee == 0.0:
-        return a + np.clip(-c / aa, 0.0, 1.0) * d1
-    f = d2 @ r
-    bb = d1 @ d2
+        return a + min(max(-c / aa, 0.0), 1.0) * d1
+    f = (d2 * r).sum()
+    bb = (d1 * d2).sum()
     denominator = aa * ee - bb * bb
-    s = np.clip((bb * f - c * ee) / denominator, 0.0, 1.0) if denominator > 0.0 else 0.0
+    s = min(max((bb * f - c * ee) / denominator, 0.0), 1.0) if denominator > 0.0 else 0.0
     t = (bb * s + f) / ee
     if t < 0.0:
-        s = np.clip(-c / aa, 0.0, 1.0)
+        s = min(max(-c / aa, 0.0), 1.0)
     elif t > 1.0:
-        s = np.clip((bb - c) / aa, 0.0, 1.0)
+        s = min(max((bb - c) / aa, 0.0), 1.0)
     return a + s * d1
 
 
-def _distance_to_segment(x, p, q) -> float:
+@njit(cache=True)
+def _distance_to_segment(x, p, q):
     d = q - p
-    length2 = d @ d
-    t = 0.0 if length2 == 0.0 else float(np.clip((x - p) @ d / length2, 0.0, 1.0))
-    return float(np.linalg.norm(p + t * d - x))
+    length2 = (d * d).sum()
+    t = 0.0 if length2 == 0.0 else min(max(((x - p) * d).sum() / length2, 0.0), 1.0)
+    gap = p + t * d - x
+    return np.sqrt((gap * gap).sum())

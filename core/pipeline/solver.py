@@ -33,11 +33,11 @@ from ..errors import CancelledError, VisradError
 from ..hierarchy import Hierarchy
 from ..skeleton import Skeleton
 from ..visibility import scene_bvh
-from .checks import LeafChecks, carry, complete_steps, measure
+from .checks import LeafChecks, carry, complete_steps, links_at_samples, measure
 from .contact import contact_regions, covered_fraction, inside_regions
 from .discontinuities import ReceiverEvents, clip_to_convex, crossing, event_variation, receiver_events
 from .interpolation import locate
-from .links import BACK, FRONT, LinkSet, PairShafts, compute_links, facing_sources
+from .links import BACK, FRONT, LinkSet, PairShafts, _inside_limit, compute_links, facing_sources
 from .maxima import transfer_maxima
 from .oracle import exact_transfers
 from .perception import LUMINANCE_WEIGHTS, radiosity_threshold
@@ -261,7 +261,7 @@ class Solver:
             record["discontinuities"] = len(inserted)
         yield 0.4
         parts = [state.links]
-        for fraction in self._link_refined_vertices(hierarchy, state, mesh, exact, parts):
+        for fraction in self._link_refined_vertices(hierarchy, state, mesh, exact, parts, checks, record):
             yield 0.4 + 0.5 * fraction
         checks = carry(checks, mesh, exact, hierarchy.export_leaves(), self._emitters)
         lighting = self._gathered(hierarchy, LinkSet.concatenate(parts), checks)
@@ -390,11 +390,15 @@ class Solver:
             parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
             yield stop / len(rows)
 
-    def _link_refined_vertices(self, hierarchy: Hierarchy, state: _Lighting, old_mesh, exact, parts: list):
+    def _link_refined_vertices(
+        self, hierarchy: Hierarchy, state: _Lighting, old_mesh, exact, parts: list, checks: LeafChecks, record: dict
+    ):
         """Append to `parts` the links of the vertices refinement created (section 4.2, lazily): exact links to
         the sources `exact` (T, P) marks for the old leaf each vertex was inserted in (both leaves for a vertex on
         their shared edge), and for every other source the barycentric combination of that leaf's corners'
-        effective form factors. Yields the fraction done."""
+        effective form factors. A vertex inserted at a sample of its leaves (an edge midpoint of the regular
+        grid, a worst sample) takes the sample's exact links from `checks` (the checks of old_mesh's leaves);
+        `record` (the iteration's log) gets how many did. Yields the fraction done."""
         first = len(state.radiosity) // 2
         rows, polygons = self._vertex_sides(hierarchy, first)
         if not len(rows):
@@ -416,14 +420,26 @@ class Solver:
         inherited = (spread @ self._gather_matrix(state.links, len(state.radiosity), state.hierarchy)).tocoo()
         keep = ~wanted[inherited.row, inherited.col // 2] & (inherited.data != 0.0)
         parts.append(LinkSet(rows[inherited.row[keep]], inherited.col[keep].astype(np.int64), inherited.data[keep]))
-        for start in range(0, len(rows), _LINK_CHUNK):
-            stop = min(start + _LINK_CHUNK, len(rows))
+        found, reused = links_at_samples(
+            checks, old_mesh, positions, side, np.column_stack([best, other]), wanted, self.scene.tol.length
+        )
+        # a sample was evaluated at the point itself unless the point touches another polygon's plane
+        evaluated = _inside_limit(self.scene, positions, polygons, side, self.facing, interior)
+        found &= (evaluated == positions).all(axis=1)
+        reused = _select_points(reused, found)
+        parts.append(LinkSet(rows[reused.point], reused.column, reused.form_factor))
+        record["linked_vertex_sides"] = len(rows)
+        record["from_samples"] = int(found.sum())
+        todo = np.flatnonzero(~found)
+        for start in range(0, len(todo), _LINK_CHUNK):
+            chunk = todo[start : start + _LINK_CHUNK]
             new = compute_links(
-                self.scene, self.bvh, positions[start:stop], polygons[start:stop], side[start:stop], self.facing,
-                self.settings, interior[start:stop], wanted[start:stop], shafts=self.shafts,
+                self.scene, self.bvh, positions[chunk], polygons[chunk], side[chunk], self.facing, self.settings,
+                interior[chunk], wanted[chunk], shafts=self.shafts,
             )  # fmt: skip
-            parts.append(LinkSet(rows[start:stop][new.point], new.column, new.form_factor))
-            yield stop / len(rows)
+            parts.append(LinkSet(rows[chunk][new.point], new.column, new.form_factor))
+            yield (start + len(chunk)) / len(todo)
+        yield 1.0
 
     def _exact_transfers(self, state: _Lighting, mesh, live=None, measured=None) -> np.ndarray:
         """(T, P) bool: the sources each leaf triangle's new vertices and samples link exactly (oracle.py)."""
@@ -629,6 +645,12 @@ class Solver:
             hierarchy.insert_points(polygon, points)
             inserted += len(points)
         return inserted
+
+
+def _select_points(links: LinkSet, chosen: np.ndarray) -> LinkSet:
+    """The links whose point is chosen (N,) bool."""
+    keep = chosen[links.point]
+    return LinkSet(links.point[keep], links.column[keep], links.form_factor[keep])
 
 
 def _solve_columns(pull, reflected_gather, emitted: np.ndarray) -> np.ndarray:
