@@ -58,12 +58,12 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     n = len(start)
     if n == 0:
         return np.empty(0, dtype=np.int64)
-    flip = np.take_along_axis(direction, np.argmax(np.abs(direction), axis=1)[:, None], axis=1) < 0.0
-    unit = np.where(flip, -direction, direction)
-    foot = start - np.einsum("ij,ij->i", start, unit)[:, None] * unit
-    # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene
-    keys = np.hstack([foot / scale, unit])
-    pairs = cKDTree(keys).query_pairs(tol / scale, output_type="ndarray")
+    foot = start - np.einsum("ij,ij->i", start, direction)[:, None] * direction
+    # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene. Each line
+    # is entered with both orientations (no sign convention is safe where two components tie, a diagonal)
+    keys = np.vstack([np.hstack([foot / scale, direction]), np.hstack([foot / scale, -direction])])
+    pairs = cKDTree(keys).query_pairs(tol / scale, output_type="ndarray") % n
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if len(pairs) == 0:
         return np.arange(n, dtype=np.int64)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))

@@ -76,6 +76,11 @@ REJECT_NAMES = ("missing generator", "coincident generators", "blocked")
 
 N_COUNTERS = 3
 
+_CONTACT_LENGTHS = 1e3
+"""A line meeting two touching faces over fewer tolerance lengths than this only passes a corner of their
+contact (the tolerant overlap of a line with a polygon it touches at a corner is a few tolerance lengths
+over the sine of the angles there); a line through the contact itself runs along it over a scene length."""
+
 _TILT = 1e-6
 """Angle (radians) by which a line is tilted to read the tangent/terminal state of its generators just off a
 node; far above tol.cosine and far below any angle between two faces of a sane scene."""
@@ -205,6 +210,58 @@ def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
         else:
             lo = max(lo, (tol - offset) / rate)
     return lo, hi
+
+
+@njit(cache=True)
+def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
+    """Whether `point` (in the polygon's plane) moved by a small multiple of `delta` (3,) (in that plane) lies
+    strictly inside the polygon: inside by more than tol from every side, or on one side and moving inwards.
+    Within tol of two sides (a corner) a first-order motion tells nothing: not inside."""
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = normals[poly]
+    delta_len = np.sqrt(_dot(delta, delta))
+    on_sides = 0
+    for k in range(count):
+        a = points[first + k]
+        inward = _cross(normal, points[first + (k + 1) % count] - a)
+        inward /= np.sqrt(_dot(inward, inward))
+        depth = _dot(point - a, inward)
+        if depth > tol:
+            continue
+        on_sides += 1
+        if depth < -tol or on_sides > 1 or _dot(delta, inward) <= _SIDE_EPS * delta_len:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
+                lo, hi, diag, angle_tol, tol):  # fmt: skip
+    """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
+    itself), runs between lo and hi through the inside of two coplanar faces of different objects facing
+    each other (a box against a wall, a box's bottom on the floor): objects in contact, whose touching faces
+    hide each other; such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
+    in_plane (n_sliding,) bool: the faces whose plane holds every displaced line."""
+    for k in range(n_sliding):
+        if not in_plane[k]:
+            continue
+        for m in range(k + 1, n_sliding):
+            if not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
+                continue
+            if _dot(normals[sl_poly[k]], normals[sl_poly[m]]) > -1.0 + angle_tol:
+                continue
+            a = max(max(sl_a[k], sl_a[m]), lo)
+            b = min(min(sl_b[k], sl_b[m]), hi)
+            if b - a <= _CONTACT_LENGTHS * tol:
+                continue
+            tau = 0.5 * (a + b)
+            point = start + tau * u
+            delta = alpha + (tau / diag) * beta
+            if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol) and \
+                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol):  # fmt: skip
+                return True
+    return False
 
 
 @njit(cache=True)
@@ -393,7 +450,7 @@ def _relaxed_arc(
     vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol, plane_offsets,
     r_kind, r_id, r_group, n_retained, norm_index, norm_dir, sigma,
-    sl_poly, sl_a, sl_b, n_sliding,
+    sl_poly, sl_a, sl_b, n_sliding, object_ids,
     polys, kinds, locals_, arc_start, arc_len, codes,
 ):  # fmt: skip
     """One arc adjacent to a node: the retained generators r_* (n_retained of them, in any order), the
@@ -449,6 +506,18 @@ def _relaxed_arc(
     for j in range(n_retained):
         first = min(first, r_group[j])
         last = max(last, r_group[j])
+
+    # lines running between touching objects between the generators (see _sandwiched) are no arc
+    if n_sliding >= 2:
+        in_plane = np.zeros(n_sliding, dtype=np.bool_)
+        for k in range(n_sliding):
+            n = normals[sl_poly[k]]
+            in_plane[k] = abs(x[2] * _dot(n, f1) + x[3] * _dot(n, f2)) <= 1e-12 and \
+                abs(x[0] * _dot(n, f1) + x[1] * _dot(n, f2)) <= 1e-12  # fmt: skip
+        alpha = x[0] * f1 + x[1] * f2
+        if _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u,
+                       alpha, beta, g_tau[first], g_tau[last], diag, angle_tol, tol):  # fmt: skip
+            return False, 0, 0, 0, 0.0, 0
 
     # a face whose plane held the line is crossed where the displacement leaves its plane, if inside it
     before_tau = -np.inf
@@ -704,7 +773,7 @@ def _validate_chunk(
     points, offsets, normals, plane_offsets, corner_vertex, corner_edge, areas,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
     vertices, edges, vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_local, face_group,
-    edge_mask, cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction,
+    object_ids, edge_mask, cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction,
     lo, hi, diag, tol, angle_tol,
 ):  # fmt: skip
     n_cand = cand_kind.shape[0]
@@ -719,8 +788,9 @@ def _validate_chunk(
             if cand_edges[c, k] >= 0:
                 bound += 2
         if cand_vertices[c, 0] >= 0:
-            # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions
-            bound += 8
+            # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions; of an
+            # outer vertex replaced by an edge through it: 2 sides x 2 directions
+            bound += 12
     node_cand = np.empty(n_cand, dtype=np.int64)
     node_kind = np.empty(n_cand, dtype=np.int8)
     node_gkind = np.zeros((n_cand, 4), dtype=np.int8)
@@ -936,6 +1006,51 @@ def _validate_chunk(
                     break
                 g = g - 1 if side == 0 else g + 1
 
+        # an outer vertex generator lying on another element's edge (a box's corner on the room's floor edge,
+        # on the top edge of the box it stands on): the arcs along that edge through the vertex's point start
+        # or end here as well, so the vertex is replaced by the edge, sliding either way
+        for side in range(2):
+            if ng > 3:
+                break
+            j = 0 if side == 0 else ng - 1
+            if gk[j] != GEN_VERTEX:
+                continue
+            g = gg[j]
+            extra = -1
+            for i in range(g_lo[g], g_hi[g]):
+                if c_kind[i] != CONTACT_EDGE:
+                    continue
+                e = corner_edge[offsets[c_poly[i]] + c_local[i]]
+                if edge_mask[e] and edges[e, 0] != gid[j] and edges[e, 1] != gid[j]:
+                    extra = e
+                    break
+            if extra < 0:
+                continue
+            n_retained = 0
+            norm = -1
+            for k in range(ng):
+                r_kind[n_retained] = GEN_EDGE if k == j else gk[k]
+                r_id[n_retained] = extra if k == j else gid[k]
+                r_group[n_retained] = gg[k]
+                if k == j:
+                    norm = n_retained
+                n_retained += 1
+            norm_dir = _edge_direction(vertices, edges, extra, -1)
+            for sigma in (1.0, -1.0):
+                ok, kind, e0, e1, s, direction = _relaxed_arc(
+                    points, offsets, normals, areas, vertices, edges, n_vertices,
+                    vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
+                    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
+                    plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
+                    sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
+                )  # fmt: skip
+                if not ok:
+                    continue
+                n_inc = _record_incidence(
+                    inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
+                    direction,
+                )  # fmt: skip
+
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
         # generators and that edge stop meeting the vertex: drop the vertex, keep the edge (the arcs of such
@@ -980,7 +1095,7 @@ def _validate_chunk(
                         vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                         c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
                         plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
-                        sl_poly, sl_a, sl_b, n_sliding, polys, kinds, locals_, arc_start, arc_len, codes,
+                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                     )  # fmt: skip
                     if not ok:
                         continue
@@ -1012,7 +1127,7 @@ def _validate_chunk(
                         vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                         c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
                         plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
-                        sl_poly, sl_a, sl_b, n_sliding, polys, kinds, locals_, arc_start, arc_len, codes,
+                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                     )  # fmt: skip
                     if not ok:
                         continue
@@ -1047,7 +1162,7 @@ def _validate_chunk(
                         vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                         c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
                         plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, 1.0,
-                        sl_poly, sl_a, sl_b, n_sliding, polys, kinds, locals_, arc_start, arc_len, codes,
+                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                     )  # fmt: skip
                     if not ok:
                         continue
@@ -1076,7 +1191,8 @@ def validate_candidates(scene, topology, bvh, candidates, edge_mask):
         scene.vertices, scene.edges, topology.vertex_face_offsets, topology.vertex_faces,
         topology.vertex_face_corner, topology.vertex_edge_offsets, topology.vertex_edges,
         scene.edge_face_offsets, scene.edge_faces, topology.edge_face_local, topology.face_group,
-        np.ascontiguousarray(edge_mask, dtype=np.bool_), candidates.kind, candidates.vertices, candidates.edges,
+        np.ascontiguousarray(scene.object_ids, dtype=np.int64), np.ascontiguousarray(edge_mask, dtype=np.bool_),
+        candidates.kind, candidates.vertices, candidates.edges,
         np.ascontiguousarray(candidates.origin, dtype=np.float64),
         np.ascontiguousarray(candidates.direction, dtype=np.float64),
         scene.bbox_min - grown, scene.bbox_max + grown, scene.diagonal, scene.tol.length, scene.tol.cosine,

@@ -47,10 +47,12 @@ SCENES = {
     "box on wall": lambda: boxes_in_room([((0.0, 1.0, 0.5), (0.7, 1.6, 1.1))]),
     # a small box standing inside the top of a big one resting on the floor
     "box on box": lambda: boxes_in_room([((1.0, 1.0, 0.0), (2.6, 2.2, 0.75)), ((1.3, 1.4, 0.75), (1.55, 1.6, 1.0))]),
+    # a box in the room's corner: its corner is the room's, its bottom edges lie on the room's floor edges
+    "box in corner": lambda: boxes_in_room([((0.0, 0.0, 0.0), (0.7, 0.6, 0.6))]),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
-BOX_ROOMS = ["floating box", "box on floor", "box on wall"]
+BOX_ROOMS = ["floating box", "box on floor", "box on wall", "box in corner"]
 
 DEGENERATE = pytest.mark.xfail(
     strict=True,
