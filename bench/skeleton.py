@@ -12,6 +12,7 @@ Targets of issue 3: at least 30x faster than Table 1 at every size, at most 416 
 one-source lazy build at least 5x faster than the full build there.
 
     python -m bench skeleton [--sizes 84,168,...] [--quick] [--views N] [--pairs N] [--seed S] [--progress]
+    python -m bench skeleton --furnished 200      # issue 3: generated rooms without exception, NaN, dangling arc
 """
 
 import argparse
@@ -214,6 +215,44 @@ def query_costs(largest, views: int, pairs: int, seed: int) -> dict:
     }
 
 
+def furnished_rooms(build_skeleton, count: int) -> dict:
+    """Build the first `count` generated furnished rooms (tests/core/furnished_rooms.py: boxes resting,
+    stacked, floating, side by side, against a wall); issue 3 asks for 200 without exception, NaN or dangling
+    arc. Returns the tallies and the rooms with dangling arcs."""
+    from core.scene import Scene
+    from tests.core.furnished_rooms import furnished_room
+
+    failed, with_nan, dangling = {}, [], {}
+    seconds = []
+    for seed in range(count):
+        vertices, polygons, _, _ = furnished_room(seed)
+        n = len(polygons)
+        start = time.perf_counter()
+        try:
+            skeleton = build_skeleton(Scene.from_polygons(vertices, polygons, np.full((n, 3), 0.5), np.zeros((n, 3))))
+        except Exception as error:  # noqa: BLE001 -- every failure is what this check counts
+            failed[seed] = f"{type(error).__name__}: {error}"
+            continue
+        seconds.append(time.perf_counter() - start)
+        linked = skeleton.arcs.node >= 0
+        finite = np.isfinite(skeleton.nodes.start).all() and np.isfinite(skeleton.nodes.direction).all()
+        if not (finite and np.isfinite(skeleton.arcs.s[linked]).all()):
+            with_nan.append(seed)
+        if skeleton.stats["dangling_arcs"]:
+            dangling[seed] = skeleton.stats["dangling_arcs"]
+    return {
+        "rooms": count,
+        "exceptions": len(failed),
+        "with_nan": len(with_nan),
+        "rooms_with_dangling_arcs": len(dangling),
+        "dangling_arcs_total": int(sum(dangling.values())),
+        "seconds_mean": float(np.mean(seconds)) if seconds else float("nan"),
+        "seconds_total": float(np.sum(seconds)),
+        "failed": failed,
+        "dangling": dangling,
+    }
+
+
 def _parse_sizes(text: str) -> list[int]:
     try:
         sizes = sorted({int(s) for s in text.split(",") if s.strip()})
@@ -234,6 +273,8 @@ def main(argv) -> int:
     parser.add_argument("--pairs", type=int, default=200, help="(light, receiver) pairs timed on the largest size")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--progress", action="store_true", help="print build progress to stderr")
+    parser.add_argument("--furnished", type=int, default=0, metavar="N",
+                        help="instead: build N generated furnished rooms, count exceptions, NaN, dangling arcs")
     args = parser.parse_args(argv)
     sizes = list(OFFICE_SIZES[:3]) if args.quick else args.sizes
 
@@ -243,6 +284,16 @@ def main(argv) -> int:
     except ImportError as error:
         print(f"core.skeleton.build_skeleton is not available: {error}", file=sys.stderr)
         return 2
+
+    if args.furnished > 0:
+        report = furnished_rooms(build_skeleton, args.furnished)
+        print_table([report], ["rooms", "exceptions", "with_nan", "rooms_with_dangling_arcs", "dangling_arcs_total",
+                               "seconds_mean", "seconds_total"],
+                    title="Generated furnished rooms (touching, stacked, coplanar boxes)")
+        for seed, message in report["failed"].items():
+            print(f"  room {seed}: {message}")
+        write_results("skeleton-furnished", [report])
+        return 0
 
     started = time.perf_counter()
     # the first build compiles the numba kernels (or loads them from numba's cache)

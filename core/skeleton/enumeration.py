@@ -1050,6 +1050,14 @@ def _push(out, count, kind, v0, v1, e0, e1, e2, e3, origin, d):
 
 
 @njit(cache=True)
+def _push_edges(out, count, kind, e0, e1, e2, e3, origin, d):
+    """Append a candidate of four edge generators (E4, FEE), given in any order; returns the output."""
+    four = np.array([e0, e1, e2, e3], dtype=np.int64)
+    four.sort()
+    return _push(out, count, kind, -1, -1, four[0], four[1], four[2], four[3], origin, d)
+
+
+@njit(cache=True)
 def _trim(out, count):
     return out[0][:count].copy(), out[1][:count].copy(), out[2][:count].copy(), out[3][:count].copy(), \
         out[4][:count].copy()  # fmt: skip
@@ -1281,7 +1289,13 @@ def _vertex_candidates(
                     if side_f == side_g:
                         inner = f if abs(tf) < abs(tg) else g
                         if _edge_pierced(inner, d, vertices, edges, ef_off, ef_inward, delta):
-                            continue
+                            # two edges crossing at one point (a box's bottom edge across the top edge of the
+                            # box it stands on): either may be the inner one, the other the one the line stops on
+                            outer = g if inner == f else f
+                            if abs(abs(tf) - abs(tg)) > tol or _edge_pierced(
+                                outer, d, vertices, edges, ef_off, ef_inward, delta
+                            ):
+                                continue
                     elif _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol):
                         continue
                     if _vee_enters(v, f, g, p, d, tf, tg, others, back, vertex_object, edge_object, object_offsets,
@@ -1478,7 +1492,6 @@ def _edge_candidates(
     tgts = np.empty(4096, dtype=np.int64)
     sides = np.empty(4096, dtype=np.int8)
     roots = np.empty((2, 2))
-    four = np.empty(4, dtype=np.int64)
     region = np.empty((16, 2))
     scratch = np.empty((16, 2))
     coef = np.empty((n_edges, 4))
@@ -1690,12 +1703,7 @@ def _edge_candidates(
                             if lazy and not _line_meets(start, d, src, points, offsets, normals, plane_offsets,
                                                         edge_out, tol, angle_tol):  # fmt: skip
                                 continue
-                            four[0] = e
-                            four[1] = fx
-                            four[2] = fy
-                            four[3] = fz
-                            four.sort()
-                            out = _push(out, count, CANDIDATE_E4, -1, -1, four[0], four[1], four[2], four[3], start, d)
+                            out = _push_edges(out, count, CANDIDATE_E4, e, fx, fy, fz, start, d)
                             count += 1
     return _trim(out, count)
 
@@ -1725,7 +1733,6 @@ def _face_candidates(
     at = np.empty((n_edges, 3))
     others = np.empty((3, 3))
     u = np.empty(3)
-    four = np.empty(4, dtype=np.int64)
     for index in range(lo, hi):
         f = polygon_ids[index]
         normal = normals[f]
@@ -1828,12 +1835,7 @@ def _face_candidates(
                 if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                             angle_tol):  # fmt: skip
                     continue
-                four[0] = ei
-                four[1] = ej
-                four[2] = e_in
-                four[3] = e_out
-                four.sort()
-                out = _push(out, count, CANDIDATE_FEE, -1, -1, four[0], four[1], four[2], four[3], p, d)
+                out = _push_edges(out, count, CANDIDATE_FEE, ei, ej, e_in, e_out, p, d)
                 count += 1
     return _trim(out, count)
 
