@@ -83,22 +83,14 @@ def assemble_arcs(kind, codes, end, s, direction, node, s_tol) -> Arcs:
     edge: either face at that edge, decided by rounding at each node). Coordinates closer than s_tol (M,)
     (the tolerance length over the parameter edge's length) are one point, where ends come before starts: an
     arc of zero length is not invented and merged nodes meeting one arc from both sides pair up."""
-    if len(kind):
-        rows = np.column_stack([kind, codes, node, direction]).astype(np.int64)
-        _, first = np.unique(rows, axis=0, return_index=True)
-        first = np.sort(first)
-        kind, codes, end, s, direction, node, s_tol = (a[first] for a in (kind, codes, end, s, direction, node, s_tol))
     if len(kind) == 0:
         return Arcs(
             np.empty(0, np.int8), np.empty((0, 3), np.int64), np.empty((0, 2), np.int64),
             np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2, 2), np.int64),
         )  # fmt: skip
     order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind))
-    key_kind = kind[order]
-    key_codes = codes[order]
-    new_key = np.ones(len(order), dtype=np.bool_)
-    new_key[1:] = (key_kind[1:] != key_kind[:-1]) | (key_codes[1:] != key_codes[:-1]).any(axis=1)
-    order = order[_ends_first(new_key, s[order], s_tol[order], direction[order])]
+    order = order[_ends_first(_new_keys(kind, codes, order), s[order], s_tol[order], direction[order], node[order])]
+    new_key = _new_keys(kind, codes, order)
     pair_node, pair_s, pair_row, pair_other = _pair(new_key, direction[order], s[order], node[order])
     rows = order[pair_row]
     ends = np.stack([end[rows], end[order[pair_other]]], axis=1)
@@ -110,25 +102,43 @@ def assemble_arcs(kind, codes, end, s, direction, node, s_tol) -> Arcs:
     return Arcs(kind[rows], codes[rows], ends[:, 0], pair_node, pair_s, ends)
 
 
+def _new_keys(kind, codes, order) -> np.ndarray:
+    """(M,) bool: where the arc key (kind, generators) changes along `order`."""
+    key_kind = kind[order]
+    key_codes = codes[order]
+    new_key = np.ones(len(order), dtype=np.bool_)
+    new_key[1:] = (key_kind[1:] != key_kind[:-1]) | (key_codes[1:] != key_codes[:-1]).any(axis=1)
+    return new_key
+
+
 @njit(cache=True)
-def _ends_first(new_key, s, s_tol, direction):
-    """Permutation of incidences sorted by key then s: within each run of coordinates closer than s_tol to
-    the run's first, the ends (direction -1) come before the starts."""
+def _ends_first(new_key, s, s_tol, direction, node):
+    """Positions of the incidences sorted by key then s, reordered so that within each run of coordinates
+    closer than s_tol to the run's first the ends (direction -1) come before the starts; an incidence
+    repeating one of its run (same node, same direction: merged nodes) is left out."""
     m = len(new_key)
-    result = np.arange(m)
+    result = np.empty(m, dtype=np.int64)
+    k = 0
     i = 0
     while i < m:
         j = i + 1
         while j < m and not new_key[j] and s[j] - s[i] <= max(s_tol[i], s_tol[j]):
             j += 1
-        k = i
+        run = k
         for kept in (-1, 1):
             for r in range(i, j):
-                if direction[r] == kept:
+                if direction[r] != kept:
+                    continue
+                repeated = False
+                for q in range(run, k):
+                    if node[result[q]] == node[r] and direction[result[q]] == kept:
+                        repeated = True
+                        break
+                if not repeated:
                     result[k] = r
                     k += 1
         i = j
-    return result
+    return result[:k]
 
 
 @njit(cache=True)

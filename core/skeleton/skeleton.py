@@ -162,7 +162,8 @@ class Skeleton:
             arcs.kind, arcs.codes, arcs.ends, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
             scene.edge_face_offsets, scene.edge_faces, topo.face_group,
         )  # fmt: skip
-        order = np.lexsort((arc, second, first))
+        # emitted arc by arc, so a stable sort on the pair keeps each pair's arcs in increasing order
+        order = np.argsort(first.astype(np.int64) * topo.n_groups + second, kind="stable")
         self._arc_free = _arcs_leave_freely(
             arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
             scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
@@ -214,10 +215,13 @@ class Skeleton:
         return int(self.topology.face_group[polygon])
 
     def _pair(self, a: int, b: int) -> np.ndarray:
+        """(K,) the arcs joining surfaces a and b (either way round), in increasing order."""
+        a, b = min(a, b), max(a, b)
         lo = np.searchsorted(self._pair_first, a, side="left")
         hi = np.searchsorted(self._pair_first, a, side="right")
         inner = self._pair_second[lo:hi]
-        return self._pair_arcs[lo + np.searchsorted(inner, b, side="left") : lo + np.searchsorted(inner, b, "right")]
+        arcs = self._pair_arcs[lo + np.searchsorted(inner, b, side="left") : lo + np.searchsorted(inner, b, "right")]
+        return arcs.astype(np.int64)
 
     def interactions(self, polygon: int) -> np.ndarray:
         """Sorted (K,) int64 polygons that `polygon` sees: some critical line joins them (section 4.4)."""
@@ -225,8 +229,7 @@ class Skeleton:
         self._require(polygon)
         lo = np.searchsorted(self._pair_first, group, side="left")
         hi = np.searchsorted(self._pair_first, group, side="right")
-        groups = np.unique(self._pair_second[lo:hi])
-        groups = groups[groups != group]
+        groups = np.union1d(self._pair_second[lo:hi], self._pair_first[self._pair_second == group]).astype(np.int64)
         return _polygons_of_groups(self.topology, groups)
 
     def blockers(self, source: int, receiver: int) -> np.ndarray:
@@ -512,9 +515,9 @@ def _polygons_of_groups(topology, groups: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _touch_pairs(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group):
-    """For every arc, the (surface, surface) pairs it joins, both ways: the surfaces touched at each end are
-    the ones its lines end on (as found at either node, ends (A, 2, 2)) and those around its outer generator
-    (the lines graze it or stop on it)."""
+    """For every arc, the (surface, surface) pairs it joins, each once as (lower, higher) int32: the surfaces
+    touched at each end are the ones its lines end on (as found at either node, ends (A, 2, 2)) and those
+    around its outer generator (the lines graze it or stop on it). Returns (first, second, arc), arc by arc."""
     count = 0
     for arc in range(kind.shape[0]):
         last = 1 if kind[arc] == ARC_EV else 2
@@ -523,10 +526,10 @@ def _touch_pairs(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face
             code = codes[arc, 0 if side == 0 else last]
             sizes[side] = 2 + (vf_off[code + 1] - vf_off[code] if code < n_vertices else
                                ef_off[code - n_vertices + 1] - ef_off[code - n_vertices])
-        count += 2 * sizes[0] * sizes[1]
-    first = np.empty(count, dtype=np.int64)
-    second = np.empty(count, dtype=np.int64)
-    owner = np.empty(count, dtype=np.int64)
+        count += sizes[0] * sizes[1]
+    first = np.empty(count, dtype=np.int32)
+    second = np.empty(count, dtype=np.int32)
+    owner = np.empty(count, dtype=np.int32)
     touched = np.empty((2, 64), dtype=np.int64)
     n = 0
     for arc in range(kind.shape[0]):
@@ -544,19 +547,24 @@ def _touch_pairs(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face
                 e = code - n_vertices
                 for i in range(ef_off[e], ef_off[e + 1]):
                     sizes[side] = _add_unique(touched[side], sizes[side], face_group[ef_face[i]])
+        begin = n
         for i in range(sizes[0]):
             for j in range(sizes[1]):
-                a = touched[0, i]
-                b = touched[1, j]
+                a = min(touched[0, i], touched[1, j])
+                b = max(touched[0, i], touched[1, j])
                 if a == b:
+                    continue
+                seen = False
+                for k in range(begin, n):
+                    if first[k] == a and second[k] == b:
+                        seen = True
+                        break
+                if seen:
                     continue
                 first[n] = a
                 second[n] = b
                 owner[n] = arc
-                first[n + 1] = b
-                second[n + 1] = a
-                owner[n + 1] = arc
-                n += 2
+                n += 1
     return first[:n], second[:n], owner[:n]
 
 

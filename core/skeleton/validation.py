@@ -1199,8 +1199,9 @@ def validate_candidates(scene, topology, bvh, candidates, edge_mask):
     )  # fmt: skip
     (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end,
      i_node, i_kind, i_codes, i_end, i_s, i_dir, counters) = result  # fmt: skip
-    nodes = NodeChunk(n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end)
-    incidences = IncidenceChunk(i_node, i_kind, i_codes, i_end, i_s, i_dir)
+    # the kernel returns the used part of buffers sized for the worst case: copies let those go
+    nodes = NodeChunk(*(a.copy() for a in (n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end)))
+    incidences = IncidenceChunk(*(a.copy() for a in (i_node, i_kind, i_codes, i_end, i_s, i_dir)))
     return nodes, incidences, counters
 
 
