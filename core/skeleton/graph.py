@@ -24,22 +24,25 @@ from .validation import END_PLANAR
 
 @dataclass(frozen=True, eq=False)
 class Arcs:
-    """A arcs. kind (A,) int8 ARC_*; codes (A, 3) int64 generators in canonical line order (vertex v -> v,
-    edge e -> V + e, -1 padded); end (A, 2) int64 face groups beyond the first / last generator (END_*);
-    node (A, 2) int64 the start and end node (-1: dangling); s (A, 2) float64 their coordinates on the arc's
-    parameter edge (its lowest edge generator), start < end; ends (A, 2, 2) int64 the end face groups as
-    found at the start node and at the end node (they differ where the lines end exactly on a blocker's edge;
-    `end` is the first)."""
+    """A arcs. kind (A,) int8 ARC_*; codes (A, 3) int32 generators in canonical line order (vertex v -> v,
+    edge e -> V + e, -1 padded); node (A, 2) int32 the start and end node (-1: dangling); s (A, 2) float64
+    their coordinates on the arc's parameter edge (its lowest edge generator), start < end; ends (A, 2, 2)
+    int32 the face groups beyond the first / last generator (END_*) as found at the start node and at the end
+    node (they differ where the lines end exactly on a blocker's edge)."""
 
     kind: np.ndarray
     codes: np.ndarray
-    end: np.ndarray
     node: np.ndarray
     s: np.ndarray
     ends: np.ndarray
 
     def __len__(self) -> int:
         return len(self.kind)
+
+    @property
+    def end(self) -> np.ndarray:
+        """(A, 2) the end face groups as found at the start node."""
+        return self.ends[:, 0]
 
     @property
     def dangling(self) -> np.ndarray:
@@ -85,8 +88,8 @@ def assemble_arcs(kind, codes, end, s, direction, node, s_tol) -> Arcs:
     arc of zero length is not invented and merged nodes meeting one arc from both sides pair up."""
     if len(kind) == 0:
         return Arcs(
-            np.empty(0, np.int8), np.empty((0, 3), np.int64), np.empty((0, 2), np.int64),
-            np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2, 2), np.int64),
+            np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32), np.empty((0, 2)),
+            np.empty((0, 2, 2), np.int32),
         )  # fmt: skip
     order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind))
     order = order[_ends_first(_new_keys(kind, codes, order), s[order], s_tol[order], direction[order], node[order])]
@@ -99,7 +102,7 @@ def assemble_arcs(kind, codes, end, s, direction, node, s_tol) -> Arcs:
     # or meets it in one line, a node): a node whose end line pokes past that face reports where it ends
     planar = (ends == END_PLANAR).any(axis=1)
     ends[np.repeat(planar[:, None, :], 2, axis=1)] = END_PLANAR
-    return Arcs(kind[rows], codes[rows], ends[:, 0], pair_node, pair_s, ends)
+    return Arcs(kind[rows], codes[rows].astype(np.int32), pair_node.astype(np.int32), pair_s, ends.astype(np.int32))
 
 
 def _new_keys(kind, codes, order) -> np.ndarray:

@@ -482,8 +482,8 @@ def _parameter_tolerance(scene: Scene, codes: np.ndarray) -> np.ndarray:
 def _concatenate_nodes(parts: list[NodeChunk]) -> NodeChunk:
     if not parts:
         return NodeChunk(
-            np.empty(0, np.int8), np.zeros((0, 4), np.int8), np.full((0, 4), -1, np.int64), np.empty((0, 3)),
-            np.empty((0, 3)), np.empty((0, 4)), np.empty((0, 2), np.int64),
+            np.empty(0, np.int8), np.zeros((0, 4), np.int8), np.full((0, 4), -1, np.int32), np.empty((0, 3)),
+            np.empty((0, 3)), np.empty((0, 4)), np.empty((0, 2), np.int32),
         )  # fmt: skip
     fields = vars(parts[0]).keys()
     return NodeChunk(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in fields})
@@ -492,7 +492,7 @@ def _concatenate_nodes(parts: list[NodeChunk]) -> NodeChunk:
 def _concatenate_incidences(parts: list[IncidenceChunk]) -> IncidenceChunk:
     if not parts:
         return IncidenceChunk(
-            np.empty(0, np.int64), np.empty(0, np.int8), np.empty((0, 3), np.int64), np.empty((0, 2), np.int64),
+            np.empty(0, np.int64), np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32),
             np.empty(0), np.empty(0, np.int8),
         )  # fmt: skip
     fields = vars(parts[0]).keys()

@@ -1199,17 +1199,23 @@ def validate_candidates(scene, topology, bvh, candidates, edge_mask):
     )  # fmt: skip
     (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end,
      i_node, i_kind, i_codes, i_end, i_s, i_dir, counters) = result  # fmt: skip
-    # the kernel returns the used part of buffers sized for the worst case: copies let those go
-    nodes = NodeChunk(*(a.copy() for a in (n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end)))
-    incidences = IncidenceChunk(*(a.copy() for a in (i_node, i_kind, i_codes, i_end, i_s, i_dir)))
+    # the kernel returns the used part of buffers sized for the worst case: copies let those go (ids, codes
+    # and face groups in int32)
+    nodes = NodeChunk(
+        n_kind.copy(), n_gkind.copy(), n_gid.astype(np.int32), n_start.copy(), n_dir.copy(), n_tau.copy(),
+        n_end.astype(np.int32),
+    )  # fmt: skip
+    incidences = IncidenceChunk(
+        i_node.copy(), i_kind.copy(), i_codes.astype(np.int32), i_end.astype(np.int32), i_s.copy(), i_dir.copy()
+    )
     return nodes, incidences, counters
 
 
 @dataclass(frozen=True, eq=False)
 class NodeChunk:
-    """N validated nodes. kind (N,) int8 NODE_*; gen_kind (N, 4) int8 GEN_* and gen_id (N, 4) int64, the
+    """N validated nodes. kind (N,) int8 NODE_*; gen_kind (N, 4) int8 GEN_* and gen_id (N, 4) int32, the
     generators in line order (GEN_NONE / -1 padded); start (N, 3), direction (N, 3) unit: the line is
-    start + tau direction; tau (N, 4) each generator's position; end (N, 2) int64 the face groups met beyond
+    start + tau direction; tau (N, 4) each generator's position; end (N, 2) int32 the face groups met beyond
     the first and the last generator (END_TERMINAL when the line stops on it, END_FREE when it leaves)."""
 
     kind: np.ndarray
@@ -1227,8 +1233,8 @@ class NodeChunk:
 @dataclass(frozen=True, eq=False)
 class IncidenceChunk:
     """M (node, arc) incidences. node (M,) int64 index into the NodeChunk; kind (M,) int8 ARC_*; codes (M, 3)
-    int64 the arc's generators in canonical line order (vertex v -> v, edge e -> V + e; -1 padded); end (M, 2)
-    int64 the face groups beyond the first and last generator (END_*); s (M,) float64 the node's coordinate on
+    int32 the arc's generators in canonical line order (vertex v -> v, edge e -> V + e; -1 padded); end (M, 2)
+    int32 the face groups beyond the first and last generator (END_*); s (M,) float64 the node's coordinate on
     the arc's parameter edge; direction (M,) int8 +1 when the arc leaves the node towards larger s."""
 
     node: np.ndarray
