@@ -560,9 +560,20 @@ def _grid_range(u0, u1, w0, w1, n):
 
 
 @njit(cache=True)
+def _any_wanted(wanted, a, k0, k1, l0, l1, n):
+    """Whether some bin wants a cell of chart a in the index ranges [k0, k1) x [l0, l1)."""
+    for b in range(wanted.shape[0]):
+        for i in range(k0, k1):
+            for j in range(l0, l1):
+                if wanted[b, (a * n + i) * n + j]:
+                    return True
+    return False
+
+
+@njit(cache=True)
 def _depth_map(
     q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, depth,
+    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth,
 ):  # fmt: skip
     """Depth bounds of the source segment q[0]..q[nb] cut in nb bins (a point when nb == 1 and q[0] == q[1]).
 
@@ -575,7 +586,8 @@ def _depth_map(
     the source and the 8 corner lines pass through it shrunk by the margin: then every line of the cell does
     (the set of lines from a point through a convex body is a convex cone, and along the bin the lines of one
     direction meeting it form an interval), so it crosses the object's surface, nearer than its farthest
-    vertex facing the source.
+    vertex facing the source. Only cells some bin wants (wanted (nb, 3 n n) bool: a lazy build's source mask)
+    are worked for: the others keep their bound (a larger bound only lets more candidates through).
     """
     n_poly = normals.shape[0]
     tvals = np.empty((nb + 1, n + 1, n + 1))
@@ -606,7 +618,7 @@ def _depth_map(
             if not u0 <= u1:
                 continue
             k0, k1, l0, l1 = _grid_range(u0, u1, w0, w1, n)
-            if k1 - k0 < 1 or l1 - l0 < 1:
+            if k1 - k0 < 1 or l1 - l0 < 1 or not _any_wanted(wanted, a, k0, k1, l0, l1, n):
                 continue
             for e in range(nb + 1):
                 for k in range(k0, k1 + 1):
@@ -716,7 +728,7 @@ def _depth_map(
             if not u0 <= u1:
                 continue
             k0, k1, l0, l1 = _grid_range(u0, u1, w0, w1, n)
-            if k1 - k0 < 1 or l1 - l0 < 1:
+            if k1 - k0 < 1 or l1 - l0 < 1 or not _any_wanted(wanted, a, k0, k1, l0, l1, n):
                 continue
             # which side of the source each corner line passes through the shrunk object (nan: misses it)
             for e in range(nb + 1):
@@ -764,13 +776,14 @@ def _vertex_maps(
     """Depth maps (2, 3 n n) of the vertices `ids` into out[v]."""
     q = np.empty((2, 3))
     depth = np.empty((1, 2, 3 * n * n))
+    every = np.ones((1, 3 * n * n), dtype=np.bool_)
     for v in ids:
         q[0] = vertices[v]
         q[1] = vertices[v]
         depth[:] = np.inf
         _depth_map(
             q, 1, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, depth,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, every, depth,
         )  # fmt: skip
         out[v] = depth[0]
 
@@ -1520,7 +1533,7 @@ def _edge_candidates(
         depth = np.full((nb, 2, n_cells), np.inf)
         _depth_map(
             q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, depth,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, mask, depth,
         )  # fmt: skip
         m = 0
         for f in edge_ids:
