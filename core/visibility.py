@@ -206,7 +206,7 @@ def exact_view(scene: Scene, point, normal, source: int, blockers=None, bvh=None
     tree = bvh if bvh is not None else scene_bvh(scene)
     pieces_xy, pieces_gen, frame = _point_view(
         pts[0], nrm[0], source, allowed, *_scene_arrays(scene, allowed, source), *tree.arrays, scene.tol.length,
-        _NOTHING_LISTED, False,
+        _NOTHING_LISTED, False, False,
     )
     origin, u, v, scale = frame[0], frame[1], frame[2], frame[3][0]
     pieces = [origin + scale * (xy[:, :1] * u + xy[:, 1:2] * v) for xy in pieces_xy]
@@ -298,6 +298,7 @@ def _allowed_mask(scene: Scene, blockers) -> np.ndarray:
 
 
 _BVH_OF_SCENE: dict[int, tuple] = {}
+_CONVEX_OF_SCENE: dict[int, tuple] = {}
 
 
 def _bvh_for_every_point(count: int):
@@ -425,14 +426,33 @@ def scene_bvh(scene: Scene):
 
 
 def _scene_arrays(scene: Scene, allowed, source: int):
+    solid = _complete_solids(scene, allowed, source)
     return (
         scene.polygon_offsets,
         scene.polygon_points,
         scene.normals,
         scene.plane_offsets,
         scene.areas,
-        _complete_solids(scene, allowed, source),
+        solid,
+        np.where(solid & _convex_objects(scene), scene.object_ids, -1).astype(np.int64),
     )
+
+
+def _convex_objects(scene: Scene) -> np.ndarray:
+    """(P,) bool: polygons of solid objects that are convex (every vertex of the object on or behind the plane of
+    each of its faces, within tol.length), computed once per scene."""
+    cached = _CONVEX_OF_SCENE.get(id(scene))
+    if cached is None or cached[0] is not scene:
+        convex = scene.solid.copy()
+        for obj in np.unique(scene.object_ids[scene.solid]):
+            faces = np.flatnonzero(scene.object_ids == obj)
+            corners = np.concatenate([scene.polygon(int(f)) for f in faces])
+            heights = corners @ scene.normals[faces].T + scene.plane_offsets[faces]
+            convex[faces] = heights.max() <= scene.tol.length
+        _CONVEX_OF_SCENE.clear()
+        cached = (scene, convex)
+        _CONVEX_OF_SCENE[id(scene)] = cached
+    return cached[1]
 
 
 def _complete_solids(scene: Scene, allowed, source: int) -> np.ndarray:
@@ -447,7 +467,7 @@ def _complete_solids(scene: Scene, allowed, source: int) -> np.ndarray:
 
 @njit(cache=True)
 def _cut_form_factors(
-    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
+    points, normals, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid, hull_group,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
     triangles, first_child, child_count, roots, variation, limits,
 ):
@@ -461,7 +481,8 @@ def _cut_form_factors(
     for i in range(len(points)):
         pieces_xy, _, frame = _point_view(
             points[i], normals[i], source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
-            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps, nothing, False,
+            hull_group, node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps, nothing,
+            False, True,
         )
         if len(pieces_xy) == 0:
             continue
@@ -566,7 +587,7 @@ def _clip_half_plane(xy, ax, ay, bx, by):
 
 @njit(cache=True, parallel=True)
 def _pair_form_factors(
-    points, normals, sources, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
+    points, normals, sources, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid, hull_group,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
     shaft_of_point, shaft_offsets, shaft_ids,
 ):
@@ -579,8 +600,8 @@ def _pair_form_factors(
         listed = shaft_ids[shaft_offsets[max(shaft, 0)] : shaft_offsets[max(shaft, 0) + 1]]
         pieces_xy, _, frame = _point_view(
             points[i], normals[i], sources[i], allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
-            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
-            listed, shaft >= 0,
+            hull_group, node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps,
+            listed, shaft >= 0, True,
         )
         result[i] = _pieces_form_factor(points[i], normals[i], pieces_xy, frame)
     return result
@@ -885,13 +906,17 @@ def _bounds(xy):
 
 @njit(cache=True)
 def _point_view(
-    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid,
+    point, normal, source, allowed, offsets, corners, poly_normals, plane_offsets, areas, solid, hull_group,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max, eps, listed, use_listed,
+    merge_hulls,
 ):
     """Visible pieces of `source` from `point`, in the source's 2-D frame.
 
     Candidate blockers: with use_listed, the polygons of `listed` (K,) int64 (a shaft list of the point's
-    polygon and the source, see shaft_blockers); otherwise the BVH's polygons in the pyramid.
+    polygon and the source, see shaft_blockers); otherwise the BVH's polygons in the pyramid. With merge_hulls,
+    the faces of a complete convex solid (hull_group (P,) int64 its object, -1 for other polygons) are removed
+    at once as the convex hull of their projections (what the solid hides is convex); the pieces' labels then
+    do not name those generators, so only form factors use it.
 
     Returns (pieces_xy: list of (K, 2), pieces_labels: list of (K, 2) int64 generators, frame (4, 3): origin,
     u, v, (radius, 0, 0)); 2-D coordinates are in units of the radius.
@@ -975,6 +1000,9 @@ def _point_view(
     # many pieces: they go after the blockers in front, which leave fewer pieces to cut and may hide them
     lying = np.empty(found, dtype=np.int64)
     n_lying = 0
+    hull_xy = np.empty((64, 2))
+    hull_of = np.empty(64, dtype=np.int64)
+    n_hull = 0
     for index in range(found):
         blocker = candidates[index]
         if blocker == source or not allowed[blocker]:
@@ -1017,7 +1045,28 @@ def _point_view(
             )
         if len(projected) == 0:
             continue
+        if merge_hulls and hull_group[blocker] >= 0:
+            if n_hull + len(projected) > len(hull_of):
+                hull_xy = np.concatenate((hull_xy, np.empty((n_hull + len(projected), 2))))
+                hull_of = np.concatenate((hull_of, np.empty(n_hull + len(projected), dtype=np.int64)))
+            hull_xy[n_hull : n_hull + len(projected)] = projected
+            hull_of[n_hull : n_hull + len(projected)] = hull_group[blocker]
+            n_hull += len(projected)
+            continue
         pieces_xy, pieces_labels, boxes = _subtract(pieces_xy, pieces_labels, boxes, projected, projected_labels, eps2)
+        if len(pieces_xy) == 0:
+            return pieces_xy, pieces_labels, frame
+    by_object = np.argsort(hull_of[:n_hull], kind="mergesort")
+    start = 0
+    while start < n_hull:
+        stop = start
+        while stop < n_hull and hull_of[by_object[stop]] == hull_of[by_object[start]]:
+            stop += 1
+        hull, hull_labels = _convex_hull(hull_xy[by_object[start:stop]], hull_of[by_object[start]], eps2)
+        start = stop
+        if len(hull) == 0:
+            continue
+        pieces_xy, pieces_labels, boxes = _subtract(pieces_xy, pieces_labels, boxes, hull, hull_labels, eps2)
         if len(pieces_xy) == 0:
             return pieces_xy, pieces_labels, frame
     for index in range(n_lying):
@@ -1030,6 +1079,39 @@ def _point_view(
         if len(pieces_xy) == 0:
             break
     return pieces_xy, pieces_labels, frame
+
+
+@njit(cache=True)
+def _convex_hull(xy, group, eps2):
+    """The convex hull (K, 2) of points (N, 2), counter-clockwise (Andrew's monotone chain), cleaned (_cleanup),
+    its edges labelled (-2 - group, 0): generators that name no polygon."""
+    by_y = np.argsort(xy[:, 1], kind="mergesort")
+    order = by_y[np.argsort(xy[by_y, 0], kind="mergesort")]  # by x, then y
+    points = xy[order]
+    count = len(points)
+    chain = np.empty((2 * count + 1, 2))
+    k = 0
+    for i in range(count):  # lower chain, left to right
+        while k >= 2 and _turn(chain[k - 2], chain[k - 1], points[i]) <= 0.0:
+            k -= 1
+        chain[k] = points[i]
+        k += 1
+    lower = k + 1
+    for i in range(count - 2, -1, -1):  # upper chain, right to left
+        while k >= lower and _turn(chain[k - 2], chain[k - 1], points[i]) <= 0.0:
+            k -= 1
+        chain[k] = points[i]
+        k += 1
+    hull = chain[: max(k - 1, 0)].copy()
+    labels = np.empty((len(hull), 2), dtype=np.int64)
+    labels[:, 0] = -2 - group
+    labels[:, 1] = 0
+    return _cleanup(hull, labels, eps2)
+
+
+@njit(cache=True)
+def _turn(a, b, c):
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 
 
 @njit(cache=True)

@@ -467,3 +467,47 @@ def test_shaft_lists_are_checked():
         exact_pair_form_factors(scene, np.ones((2, 3)), np.ones((2, 3)), [0, 1], shafts=([0], _no_blockers()))
     with pytest.raises(SceneError, match="outside"):
         exact_pair_form_factors(scene, np.ones((1, 3)), np.ones((1, 3)), [0], shafts=([3], _no_blockers()))
+
+
+def test_convex_solids_hide_as_one_hull_and_other_solids_face_by_face():
+    """Form factors merge the faces of a convex solid into the hull of their projections; a non-convex solid
+    (an L-shaped prism) must not be merged. Against the shapely oracle at floor points under a turned box and
+    an L-shaped prism hanging below a light, some of them seeing the light through the L's notch (where its hull
+    would hide it)."""
+    from scipy.spatial.transform import Rotation
+
+    from core.visibility import _convex_objects
+
+    ell = np.array([[0, 0], [1.2, 0], [1.2, 0.4], [0.4, 0.4], [0.4, 1.2], [0, 1.2]], float) + [-0.6, -0.6]
+    bottom = np.column_stack([ell, np.full(6, 1.0)])
+    top = np.column_stack([ell, np.full(6, 1.3)])
+    box, box_quads_ = box_quads((-0.2, -0.2, -0.15), (0.2, 0.2, 0.15))
+    box = box @ Rotation.from_euler("xyz", [0.4, 0.7, 0.2]).as_matrix().T + [1.4, 0.3, 1.2]
+    light = np.array([[-1.0, -1.0, 2.5], [-1.0, 2.0, 2.5], [2.0, 2.0, 2.5], [2.0, -1.0, 2.5]])
+    vertices = np.concatenate([light, bottom, top, box])
+    polygons = [[0, 1, 2, 3], list(range(9, 3, -1)), list(range(10, 16))]
+    polygons += [[4 + j, 4 + (j + 1) % 6, 10 + (j + 1) % 6, 10 + j] for j in range(6)]
+    polygons += [[16 + i for i in quad] for quad in box_quads_]
+    objects = [0] + [1] * 8 + [2] * 6
+    count = len(polygons)
+    emission = np.zeros((count, 3))
+    emission[0] = 1.0
+    scene = Scene.from_polygons(vertices, polygons, np.full((count, 3), 0.5), emission, object_ids=objects)
+    ell_polygons = np.flatnonzero(scene.object_ids == 1)
+    box_polygons = np.flatnonzero(scene.object_ids == 2)
+    assert scene.solid[ell_polygons].all() and scene.solid[box_polygons].all()
+    convex = _convex_objects(scene)
+    assert not convex[ell_polygons].any() and convex[box_polygons].all()
+    rng = np.random.default_rng(4)
+    points = np.column_stack([rng.uniform(-1.5, 2.5, 400), rng.uniform(-1.5, 2.5, 400), np.zeros(400)])
+    normals = np.tile([0.0, 0.0, 1.0], (400, 1))
+    ours = exact_form_factors(scene, points, normals, 0)
+    blockers = [scene.polygon(p) for p in range(1, scene.n_polygons)]
+    hull_of_ell = [np.column_stack([[-0.6, 0.6, 0.6, -0.6], [-0.6, -0.6, 0.6, 0.6], np.full(4, 1.0)])]
+    through_notch = 0
+    for i in range(400):
+        expected = oracle_form_factor(points[i], normals[i], scene.polygon(0), blockers)
+        assert abs(ours[i] - expected) <= 1e-9 * max(expected, 1e-3), (i, ours[i], expected)
+        if expected > oracle_form_factor(points[i], normals[i], scene.polygon(0), blockers + hull_of_ell) + 1e-4:
+            through_notch += 1
+    assert through_notch > 20
