@@ -109,15 +109,20 @@ def _available_memory() -> int | None:
     return None
 
 
+# the polygon ids the blocker lists of PairShafts may hold (256 MiB of int64); pairs beyond use the BVH
+_SHAFT_BUDGET = 1 << 25
+
+
 class PairShafts:
     """The blocker lists of receiver-source polygon pairs (seed 000 section 5.3: the polygon-polygon links carry
     the blocker lists from which views at new vertices are computed, and detect full visibility), each pair's
     computed on first use (core.visibility.shaft_blockers) and kept: refinement asks for the same pairs at every
     iteration."""
 
-    def __init__(self, scene, bvh):
+    def __init__(self, scene, bvh, budget: int = _SHAFT_BUDGET):
         self.scene = scene
         self.bvh = bvh
+        self.budget = budget
         self._keys = np.empty(0, dtype=np.int64)  # receiver * P + source, in the order the pairs were computed
         self._order = np.empty(0, dtype=np.int64)  # argsort of _keys
         self.lists = ShaftBlockers(np.zeros(1, dtype=np.int64), np.empty(0, dtype=np.int64))
@@ -126,13 +131,14 @@ class PairShafts:
         return len(self._keys)
 
     def lookup(self, receivers, sources) -> np.ndarray:
-        """(N,) int64: the index in self.lists of each (receiver, source) polygon pair, computing new pairs."""
+        """(N,) int64: the index in self.lists of each (receiver, source) polygon pair, computing new pairs; -1
+        for pairs left to the BVH once the lists hold `budget` polygon ids (huge scenes)."""
         count = self.scene.n_polygons
         keys = np.asarray(receivers, dtype=np.int64) * count + np.asarray(sources, dtype=np.int64)
         wanted = np.unique(keys)
         known = self._find(wanted) >= 0
         new = wanted[~known]
-        if len(new):
+        if len(new) and len(self.lists.ids) < self.budget:
             found = shaft_blockers(self.scene, new // count, new % count, self.bvh)
             total = self.lists.offsets[-1]
             self.lists = ShaftBlockers(

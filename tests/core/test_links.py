@@ -81,3 +81,25 @@ def test_pair_shafts_compute_each_pair_once_and_find_it_again(monkeypatch):
             np.testing.assert_array_equal(shafts.lists.blockers(int(k)), alone.blockers(0))
     assert len(computed) == len(set(computed)) == len(shafts)
     assert len(shafts) == len(set(zip(*np.concatenate([first, second], axis=1).tolist(), strict=True)))
+
+
+def test_pair_shafts_leave_pairs_to_the_bvh_beyond_their_budget():
+    """Once the lists hold `budget` polygon ids, new pairs get -1 (the BVH) and the form factors stay exact."""
+    from core.pipeline import Settings
+    from core.visibility import scene_bvh
+
+    scene = _room(True)
+    shafts = links.PairShafts(scene, scene_bvh(scene), budget=1)
+    first = shafts.lookup([0, 1, 2], [5, 5, 5])
+    assert (first >= 0).all() and len(shafts.lists.ids) >= 1
+    later = shafts.lookup([3, 0], [5, 5])
+    assert later[0] == -1 and later[1] == first[0]
+    facing = links.facing_sources(scene)
+    points = np.array([scene.centroids[p] for p in range(4)])
+    polygons = np.arange(4)
+    sides = np.zeros(4, dtype=np.int64)
+    settings = Settings()
+    limited = links.compute_links(scene, shafts.bvh, points, polygons, sides, facing, settings, shafts=shafts)
+    everything = links.compute_links(scene, shafts.bvh, points, polygons, sides, facing, settings)
+    np.testing.assert_array_equal(limited.column, everything.column)
+    np.testing.assert_allclose(limited.form_factor, everything.form_factor, rtol=0, atol=1e-12)
