@@ -216,7 +216,8 @@ class Skeleton:
 
     def _pair(self, a: int, b: int) -> np.ndarray:
         """(K,) the arcs joining surfaces a and b (either way round), in increasing order."""
-        a, b = min(a, b), max(a, b)
+        # keys of the index's own dtype: another one would have searchsorted convert the whole index
+        a, b = np.int32(min(a, b)), np.int32(max(a, b))
         lo = np.searchsorted(self._pair_first, a, side="left")
         hi = np.searchsorted(self._pair_first, a, side="right")
         inner = self._pair_second[lo:hi]
@@ -227,6 +228,7 @@ class Skeleton:
         """Sorted (K,) int64 polygons that `polygon` sees: some critical line joins them (section 4.4)."""
         group = self._group(polygon, "polygon")
         self._require(polygon)
+        group = np.int32(group)
         lo = np.searchsorted(self._pair_first, group, side="left")
         hi = np.searchsorted(self._pair_first, group, side="right")
         groups = np.union1d(self._pair_second[lo:hi], self._pair_first[self._pair_second == group]).astype(np.int64)
@@ -238,14 +240,9 @@ class Skeleton:
         a = self._group(source, "source")
         b = self._group(receiver, "receiver")
         self._require(source)
-        arcs = self._pair(a, b)
-        faces = []
+        codes = np.unique(self.arcs.codes[self._pair(a, b)])
         topo, scene = self.topology, self.scene
-        for arc in arcs:
-            for code in self.arcs.codes[arc]:
-                if code < 0:
-                    continue
-                faces.append(_element_faces(scene, topo, int(code)))
+        faces = [_element_faces(scene, topo, int(code)) for code in codes[codes >= 0]]
         if not faces:
             return np.empty(0, dtype=np.int64)
         polygons = np.unique(np.concatenate(faces))
@@ -272,9 +269,8 @@ class Skeleton:
         offset = scene.plane_offsets[receiver]
         pieces = []
         generators = []
-        dangling = self.arcs.dangling
         for arc in self._pair(a, b):
-            if dangling[arc]:
+            if (self.arcs.node[arc] < 0).any():
                 continue
             codes = self.arcs.codes[arc]
             if any(
@@ -391,7 +387,7 @@ class Skeleton:
             side = _seen_side(scene, topo, int(edge), group, apex, group if on_source else int(arcs.end[arc, 1]))
             if side == 0:
                 continue
-            if arcs.dangling[arc]:
+            if (arcs.node[arc] < 0).any():
                 raise VisradError(
                     f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
                     f"{edge} lacks a node (build the skeleton completely or report the scene)"
