@@ -241,3 +241,30 @@ def test_presets():
     assert Settings.preset("Accurate", jnd=0.01).jnd == 0.01
     with pytest.raises(VisradError, match="presets"):
         Settings.preset("best")
+
+
+def test_views_from_pair_blocker_lists_and_sample_links_change_nothing():
+    """The solver computes views from the blocker lists of polygon pairs (empty lists: full visibility) and gives
+    vertices inserted at samples the samples' links; the same solve with neither (every view from the whole
+    scene's BVH, every new vertex linked afresh) gives the same radiosity."""
+    scene = _light_box_plane_scene()
+    fast = Solver(scene, Settings(max_iterations=3))
+    result = fast.solve()
+    lists = result.stats["blocker_lists"]
+    assert lists["pairs"] > 10 and 0 < lists["unoccluded"] < lists["pairs"]
+    assert sum(record["from_samples"] for record in result.stats["refinement"] if "from_samples" in record) > 0
+
+    plain = Solver(scene, Settings(max_iterations=3))
+    plain.build_skeleton()
+    plain.shafts = None
+    fresh = plain._link_refined_vertices
+
+    def linking_every_vertex(hierarchy, state, old_mesh, exact, parts, checks, record):
+        nothing_known = checks.__class__(checks.corners, checks.live, checks.sampled, np.zeros_like(checks.known))
+        yield from fresh(hierarchy, state, old_mesh, exact, parts, nothing_known, record)
+
+    plain._link_refined_vertices = linking_every_vertex
+    reference = plain.solve()
+    assert all(record.get("from_samples", 0) == 0 for record in reference.stats["refinement"])
+    np.testing.assert_array_equal(result.triangles, reference.triangles)
+    np.testing.assert_allclose(result.radiosity, reference.radiosity, rtol=1e-9, atol=1e-12 * LIGHT_EXITANCE)
