@@ -150,10 +150,10 @@ class PairShafts:
         return self._find(keys)
 
     def _find(self, keys: np.ndarray) -> np.ndarray:
-        sorted_keys = self._keys[self._order]
-        at = np.minimum(np.searchsorted(sorted_keys, keys), max(len(sorted_keys) - 1, 0))
-        if not len(sorted_keys):
+        if not len(self._keys):
             return np.full(len(keys), -1, dtype=np.int64)
+        sorted_keys = self._keys[self._order]
+        at = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
         return np.where(sorted_keys[at] == keys, self._order[at], -1)
 
 
