@@ -221,12 +221,13 @@ def test_vertex_form_factors_are_exact(name):
 @pytest.mark.parametrize("name", ["box on box", "lamp table", "furnished room 0"])
 def test_answered_form_factors_are_exact_in_degenerate_scenes(name):
     """Where views do not close yet the skeleton refuses (VisradError), never answers wrong: every answer at a
-    vertex of the lamp table or a furnished room (touching, stacked, coplanar boxes) is exact."""
+    vertex of the lamp table or a furnished room (touching, stacked, coplanar boxes) is exact, and at least 95 %
+    of the queries are answered (lamp table: all but 4 of 11 956, furnished room 0: all but 452 of 10 584)."""
     scene = _scene(name)
     vertices, receivers, values = _skeleton_form_factors(name, refused=True)
     answered = np.isfinite(values)
     print(f"\n{name}: {np.count_nonzero(~answered)} of {values.size} queries refused")
-    assert answered.mean() > 0.5
+    assert answered.mean() > 0.95
     for source in range(scene.n_polygons):
         exact = _exact_from_the_free_side(scene, vertices, receivers, source)
         error = np.where(answered[:, source], np.abs(values[:, source] - exact), 0.0)
