@@ -235,8 +235,9 @@ def links_at_samples(checks: LeafChecks, mesh, points, sides, leaves, wanted, ep
         covered[matched] |= checks.live[at[matched]]
     found &= ~(wanted & ~covered).any(axis=1)
     found &= (rows >= 0).any(axis=1)
-    point = np.repeat(np.arange(count), 2)[found.repeat(2) & (rows.ravel() >= 0)]
-    picked = checks.sampled[rows.ravel()[found.repeat(2) & (rows.ravel() >= 0)]].tocoo()
+    taken = found.repeat(2) & (rows.ravel() >= 0)
+    point = np.repeat(np.arange(count), 2)[taken]
+    picked = checks.sampled[rows.ravel()[taken]].tocoo()
     point, column, value = point[picked.row], picked.col.astype(np.int64), picked.data
     keep = wanted[point, column // 2]
     point, column, value = point[keep], column[keep], value[keep]

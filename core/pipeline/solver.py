@@ -434,8 +434,8 @@ class Solver:
         for start in range(0, len(todo), _LINK_CHUNK):
             chunk = todo[start : start + _LINK_CHUNK]
             new = compute_links(
-                self.scene, self.bvh, positions[chunk], polygons[chunk], side[chunk], self.facing, self.settings,
-                interior[chunk], wanted[chunk], shafts=self.shafts,
+                self.scene, self.bvh, evaluated[chunk], polygons[chunk], side[chunk], self.facing, self.settings,
+                wanted=wanted[chunk], evaluated=True, shafts=self.shafts,
             )  # fmt: skip
             parts.append(LinkSet(rows[chunk][new.point], new.column, new.form_factor))
             yield (start + len(chunk)) / len(todo)
