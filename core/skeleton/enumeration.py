@@ -43,7 +43,9 @@ margin), angles are tol.snap / tol.scale (the angle under which tol.snap is seen
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
@@ -53,7 +55,7 @@ from ..raycast import CONTACT_VERTEX, _arcs_cover_circle, _contact_arc, _perpend
 from ..scene import Scene
 from .candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 from .topology import scene_topology
-from .validation import _shared_face
+from .validation import WORKERS, _shared_face
 
 DEFAULT_CHUNK = 100_000
 """Largest number of candidates in one yielded chunk by default (about one second of validation)."""
@@ -87,13 +89,15 @@ def iter_candidates(
     sources=None,
     chunk: int = DEFAULT_CHUNK,
     cancel: Cancel | None = None,
+    workers: int = WORKERS,
 ) -> Iterator[tuple[NodeCandidates, float]]:
     """Yield (candidates, fraction done) until every candidate line of the scene is proposed.
 
     scene: core.scene.Scene. vertex_mask (V,) bool: the vertices that may generate nodes. edge_mask (E,) bool:
     the edges that may (not flat). sources: None for every line, or polygon ids: only lines crossing one of
     them (within tol; seed 003 section 5). chunk: most candidates per yielded NodeCandidates (>= 1).
-    cancel: a callable checked between chunks; CancelledError is raised when it returns True.
+    cancel: a callable checked between chunks; CancelledError is raised when it returns True. workers: threads
+    running work units at once (the kernels release the GIL); the candidates do not depend on it.
 
     Chunks are never empty; fractions increase strictly and the last one is 1.0. Each candidate appears
     once: VV with vertices (v, w), v < w; VEE with edges sorted; E4 and FEE with their four edges sorted.
@@ -140,34 +144,36 @@ def iter_candidates(
         if cancel is not None and cancel():
             raise CancelledError("node enumeration cancelled")
 
-    for index, (phase, lo, hi, _) in enumerate(steps):
-        check_cancel()
-        found = None
+    def run(step):
+        phase, lo, hi, _ = step
         if phase == "map":
             _vertex_maps(
                 vertex_ids[lo:hi], g.vertices, g.points, g.offsets, g.normals, g.plane_offsets, g.edge_out,
                 g.centres, g.radii, *g.objects, g.grid, CELLS, g.margin, g.delta, g.eps, vertex_depth,
             )  # fmt: skip
-        elif phase == "vertex":
-            found = _vertex_candidates(
+            return None
+        if phase == "vertex":
+            return _vertex_candidates(
                 vertex_ids, lo, hi, vmask, emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
                 g.plane_offsets, g.edge_out, g.vf_off, g.vf_face, g.vf_corner, g.ve_off, g.ve_edge, g.ef_off,
                 g.ef_face, g.ef_inward, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.grid, CELLS,
                 vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
             )  # fmt: skip
-        elif phase == "face":
-            found = _face_candidates(
+        if phase == "face":
+            return _face_candidates(
                 polygon_ids, lo, hi, emask, g.vertices, g.edges, g.points, g.offsets, g.normals, g.plane_offsets,
                 g.edge_out, g.corner_edge, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.vf_off,
                 g.vf_face, g.ef_off, g.ef_face, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
             )  # fmt: skip
-        else:
-            found = _edge_candidates(
-                edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
-                g.plane_offsets, g.edge_out, g.centres, g.radii, *g.objects, g.ef_off, g.ef_face, g.ef_inward, g.vf_off,
-                g.vf_face, g.vertex_object, g.edge_object, g.grid, CELLS,
-                lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
-            )  # fmt: skip
+        return _edge_candidates(
+            edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
+            g.plane_offsets, g.edge_out, g.centres, g.radii, *g.objects, g.ef_off, g.ef_face, g.ef_inward, g.vf_off,
+            g.vf_face, g.vertex_object, g.edge_object, g.grid, CELLS,
+            lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+        )  # fmt: skip
+
+    n_maps = sum(1 for step in steps if step[0] == "map")
+    for index, found in enumerate(_in_order(run, steps, n_maps, workers, check_cancel)):
         before = done / total
         done += weights[index]
         after = done / total
@@ -194,6 +200,27 @@ def iter_candidates(
     if pending is not None:
         check_cancel()
         yield pending, 1.0
+
+
+def _in_order(run, steps: list, n_first: int, workers: int, check_cancel) -> Iterator:
+    """run(step) for every step, on `workers` threads, yielding the results in step order. The first n_first
+    steps all finish before any later one starts (they fill the maps the later ones read); at most two results
+    per worker wait to be yielded, so memory does not grow with the number of steps."""
+    if workers <= 1:
+        for step in steps:
+            check_cancel()
+            yield run(step)
+        return
+    with ThreadPoolExecutor(workers) as pool:
+        pending: deque = deque()
+        yield from pool.map(run, steps[:n_first])
+        for step in steps[n_first:]:
+            if len(pending) >= 2 * workers:
+                yield pending.popleft().result()
+            check_cancel()
+            pending.append(pool.submit(run, step))
+        while pending:
+            yield pending.popleft().result()
 
 
 def _slice(c: NodeCandidates, lo: int, hi: int) -> NodeCandidates:
@@ -768,7 +795,7 @@ def _depth_map(
                                 depth[b, 1, cell] = reach
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vertex_maps(
     ids, vertices, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
     object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, out,
@@ -1155,7 +1182,7 @@ def _enters_object(is_vertex, gid, u, others, n_others, vertex_object, edge_obje
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _vertex_candidates(
     vertex_ids, lo, hi, vmask, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out,
     vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_inward, vertex_object, edge_object,
@@ -1475,7 +1502,7 @@ def _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, vec):
     return hi_w * vec[a] - vec[c]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _edge_candidates(
     sources, source_bins, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, centres, radii,
     object_offsets, object_polygons, object_vertex_offsets, object_vertices, ef_off, ef_face, ef_inward, vf_off,
@@ -1725,7 +1752,7 @@ def _edge_candidates(
 # FEE / EFE: lines in a face's plane through the crossings of two edges (section 3.2.3)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _face_candidates(
     polygon_ids, lo, hi, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, corner_edge,
     vertex_object, edge_object, object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face,

@@ -24,6 +24,8 @@ the scene, END_PLANAR both ends of lines lying in a face's plane.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +77,12 @@ REJECT_BLOCKED = 2
 REJECT_NAMES = ("missing generator", "coincident generators", "blocked")
 
 N_COUNTERS = 3
+
+WORKERS = max(1, min(2, os.cpu_count() or 1))
+"""Threads validating one chunk of candidates (the machines this is tuned for have two cores)."""
+
+_MIN_SLICE = 2_000
+"""Fewest candidates worth a thread of their own."""
 
 _CONTACT_LENGTHS = 1e3
 """A line meeting two touching faces over fewer tolerance lengths than this only passes a corner of their
@@ -768,7 +776,7 @@ def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
     return edge
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _validate_chunk(
     points, offsets, normals, plane_offsets, corner_vertex, corner_edge, areas,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
@@ -1178,12 +1186,46 @@ def _validate_chunk(
     )
 
 
-def validate_candidates(scene, topology, bvh, candidates, edge_mask):
+def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS):
     """Cast every candidate line; return (NodeChunk, IncidenceChunk, counters (N_COUNTERS,) int64).
 
     scene: core.scene.Scene; topology: core.skeleton.topology.Topology; bvh: core.bvh.BVH of the scene;
     candidates: NodeCandidates; edge_mask (E,) bool: the edges a vertex generator may slide along.
+    workers: threads casting consecutive slices of the candidates at once (the kernel releases the GIL); the
+    result is the same for any number, in candidate order.
     """
+    n = len(candidates.kind)
+    parts = max(1, min(int(workers), n // _MIN_SLICE))
+    bounds = np.linspace(0, n, parts + 1).astype(np.int64)
+    slices = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
+    if parts == 1:
+        results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, 0, n)]
+    else:
+        with ThreadPoolExecutor(parts) as pool:
+            results = list(
+                pool.map(lambda b: _validate_slice(scene, topology, bvh, candidates, edge_mask, *b), slices)
+            )
+    if len(results) == 1:
+        return results[0]
+    node_parts, incidence_parts, counters = zip(*results, strict=True)
+    first_node = np.cumsum([0] + [len(nodes) for nodes in node_parts[:-1]])
+    incidence_parts = [
+        IncidenceChunk(p.node + offset, p.kind, p.codes, p.end, p.s, p.direction)
+        for p, offset in zip(incidence_parts, first_node, strict=True)
+    ]
+    nodes = _stacked(NodeChunk, node_parts)
+    incidences = _stacked(IncidenceChunk, incidence_parts)
+    return nodes, incidences, np.sum(counters, axis=0)
+
+
+def _stacked(chunk_type, parts):
+    """One chunk_type (NodeChunk or IncidenceChunk) holding the rows of `parts` in order."""
+    columns = [vars(part).values() for part in parts]
+    return chunk_type(*(np.concatenate(arrays) for arrays in zip(*columns, strict=True)))
+
+
+def _validate_slice(scene, topology, bvh, candidates, edge_mask, lo: int, hi: int):
+    """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice)."""
     grown = scene.diagonal
     result = _validate_chunk(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
@@ -1192,9 +1234,9 @@ def validate_candidates(scene, topology, bvh, candidates, edge_mask):
         topology.vertex_face_corner, topology.vertex_edge_offsets, topology.vertex_edges,
         scene.edge_face_offsets, scene.edge_faces, topology.edge_face_local, topology.face_group,
         np.ascontiguousarray(scene.object_ids, dtype=np.int64), np.ascontiguousarray(edge_mask, dtype=np.bool_),
-        candidates.kind, candidates.vertices, candidates.edges,
-        np.ascontiguousarray(candidates.origin, dtype=np.float64),
-        np.ascontiguousarray(candidates.direction, dtype=np.float64),
+        candidates.kind[lo:hi], candidates.vertices[lo:hi], candidates.edges[lo:hi],
+        np.ascontiguousarray(candidates.origin[lo:hi], dtype=np.float64),
+        np.ascontiguousarray(candidates.direction[lo:hi], dtype=np.float64),
         scene.bbox_min - grown, scene.bbox_max + grown, scene.diagonal, scene.tol.length, scene.tol.cosine,
     )  # fmt: skip
     (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end,

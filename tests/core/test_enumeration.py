@@ -23,6 +23,7 @@ from bench.scenes import SceneBuilder
 from core.bvh import build_bvh
 from core.errors import CancelledError, SceneError
 from core.scene import Scene
+from core.skeleton import validation
 from core.skeleton.candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 from core.skeleton.enumeration import iter_candidates
 from core.skeleton.topology import scene_topology
@@ -255,6 +256,24 @@ def test_chunks_and_fractions():
     assert all(b > a for a, b in zip(fractions, fractions[1:], strict=False))
     merged = NodeCandidates.concatenate([c for c, _ in small])
     assert line_keys(merged) == line_keys(whole[0][0])
+
+
+def test_threads_change_no_candidate_and_no_node(monkeypatch):
+    monkeypatch.setattr(validation, "_MIN_SLICE", 100)
+    scene = generic_closed_room(2, 3).scene
+    vertex_mask, edge_mask = generator_masks(scene)
+    topology, bvh = scene_topology(scene), build_bvh(scene)
+    results = []
+    for workers in (1, 2):
+        candidates = NodeCandidates.concatenate(
+            [c for c, _ in iter_candidates(scene, vertex_mask, edge_mask, chunk=500, workers=workers)]
+        )
+        assert len(candidates) >= 200
+        nodes, incidences, counters = validate_candidates(scene, topology, bvh, candidates, edge_mask, workers)
+        results.append([*vars(candidates).values(), *vars(nodes).values(), *vars(incidences).values(), counters])
+    assert len(results[1][-5]) > 0
+    for serial, threaded in zip(*results, strict=True):
+        assert np.array_equal(serial, threaded)
 
 
 def test_cancel_stops_after_the_first_chunk():
