@@ -51,7 +51,7 @@ class Arcs:
 
 
 def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol: float) -> np.ndarray:
-    """(N,) int64: for each node line (start (N, 3), unit direction (N, 3)), the lowest id of the nodes on the
+    """(N,) int32: for each node line (start (N, 3), unit direction (N, 3)), the lowest id of the nodes on the
     same line (within tol, lengths; scale: the scene's diagonal).
 
     In degenerate scenes one extremal line goes through more generators than its kind needs (a vertex, a
@@ -60,130 +60,170 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     """
     n = len(start)
     if n == 0:
-        return np.empty(0, dtype=np.int64)
-    foot = start - np.einsum("ij,ij->i", start, direction)[:, None] * direction
+        return np.empty(0, dtype=np.int32)
     # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene. Each line
-    # is entered with both orientations (no sign convention is safe where two components tie, a diagonal)
-    keys = np.vstack([np.hstack([foot / scale, direction]), np.hstack([foot / scale, -direction])])
-    pairs = cKDTree(keys).query_pairs(tol / scale, output_type="ndarray") % n
+    # is entered with both orientations (no sign convention is safe where two components tie, a diagonal).
+    # The keys are written in place: stacked copies of them set the peak memory of a build
+    keys = np.empty((2 * n, 6))
+    keys[:n, :3] = start
+    keys[:n, :3] -= np.einsum("ij,ij->i", start, direction)[:, None] * direction
+    keys[:n, :3] /= scale
+    keys[n:, :3] = keys[:n, :3]
+    keys[:n, 3:] = direction
+    np.negative(direction, out=keys[n:, 3:])
+    pairs = cKDTree(keys).query_pairs(tol / scale, output_type="ndarray")
+    del keys
+    pairs %= n
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if len(pairs) == 0:
-        return np.arange(n, dtype=np.int64)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        return np.arange(n, dtype=np.int32)
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
-    lowest = np.full(labels.max() + 1, n, dtype=np.int64)
-    np.minimum.at(lowest, labels, np.arange(n, dtype=np.int64))
+    lowest = np.full(labels.max() + 1, n, dtype=np.int32)
+    np.minimum.at(lowest, labels, np.arange(n, dtype=np.int32))
     return lowest[labels]
 
 
-def assemble_arcs(kind, codes, end, s, direction, node, s_tol) -> Arcs:
+def assemble_arcs(kind, codes, end, s, direction, node, edge_tol, n_vertices) -> Arcs:
     """Pair the incidences (M,) (see core.skeleton.validation.IncidenceChunk; node: global node ids, coincident
     nodes already merged) into arcs. An incidence repeated by merged nodes counts once.
 
     An arc is keyed by its generators alone: through a point of its parameter edge there is one line meeting
     the others, so two arcs with the same generators never overlap, and consecutive nodes along the edge bound
     one arc even where they disagree about the face its lines end on (a line ending exactly on a blocker's
-    edge: either face at that edge, decided by rounding at each node). Coordinates closer than s_tol (M,)
-    (the tolerance length over the parameter edge's length) are one point, where ends come before starts: an
-    arc of zero length is not invented and merged nodes meeting one arc from both sides pair up."""
+    edge: either face at that edge, decided by rounding at each node). Coordinates closer than the tolerance
+    length are one point (edge_tol (E,): that length over each edge's length, taken on the arc's parameter
+    edge, code - n_vertices), where ends come before starts: an arc of zero length is not invented and merged
+    nodes meeting one arc from both sides pair up."""
     if len(kind) == 0:
         return Arcs(
             np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32), np.empty((0, 2)),
             np.empty((0, 2, 2), np.int32),
         )  # fmt: skip
     order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind))
-    order = order[_ends_first(_new_keys(kind, codes, order), s[order], s_tol[order], direction[order], node[order])]
-    new_key = _new_keys(kind, codes, order)
-    pair_node, pair_s, pair_row, pair_other = _pair(new_key, direction[order], s[order], node[order])
-    rows = order[pair_row]
-    ends = np.stack([end[rows], end[order[pair_other]]], axis=1)
-    ends[pair_other < 0, 1] = ends[pair_other < 0, 0]
+    # the kernels read the incidences through `order`: gathered copies of them set the peak memory of a build
+    order = _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node)
+    n_arcs = _count_arcs(order, kind, codes, direction)
+    rows, others, pair_node, pair_s = _pair(order, kind, codes, direction, s, node, n_arcs)
+    del order
+    ends = np.empty((n_arcs, 2, 2), dtype=np.int32)
+    ends[:, 0] = end[rows]
+    ends[:, 1] = end[np.where(others < 0, rows, others)]
     # lines lying in a face's plane at one node lie in it all along the arc (a plane holds the whole swath
     # or meets it in one line, a node): a node whose end line pokes past that face reports where it ends
     planar = (ends == END_PLANAR).any(axis=1)
     ends[np.repeat(planar[:, None, :], 2, axis=1)] = END_PLANAR
-    return Arcs(kind[rows], codes[rows].astype(np.int32), pair_node.astype(np.int32), pair_s, ends.astype(np.int32))
-
-
-def _new_keys(kind, codes, order) -> np.ndarray:
-    """(M,) bool: where the arc key (kind, generators) changes along `order`."""
-    key_kind = kind[order]
-    key_codes = codes[order]
-    new_key = np.ones(len(order), dtype=np.bool_)
-    new_key[1:] = (key_kind[1:] != key_kind[:-1]) | (key_codes[1:] != key_codes[:-1]).any(axis=1)
-    return new_key
+    return Arcs(kind[rows], codes[rows].astype(np.int32), pair_node, pair_s, ends)
 
 
 @njit(cache=True)
-def _ends_first(new_key, s, s_tol, direction, node):
-    """Positions of the incidences sorted by key then s, reordered so that within each run of coordinates
-    closer than s_tol to the run's first the ends (direction -1) come before the starts; an incidence
-    repeating one of its run (same node, same direction: merged nodes) is left out."""
-    m = len(new_key)
-    result = np.empty(m, dtype=np.int64)
+def _same_key(kind, codes, i, j):
+    """Whether incidences i and j have the same arc key (kind, generators)."""
+    return (kind[i] == kind[j] and codes[i, 0] == codes[j, 0] and codes[i, 1] == codes[j, 1]
+            and codes[i, 2] == codes[j, 2])
+
+
+@njit(cache=True)
+def _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node):
+    """The incidences sorted by key then s (`order` (M,) int64), reordered so that within each run of
+    coordinates closer than the tolerance to the run's first the ends (direction -1) come before the starts;
+    an incidence repeating one of its run (same node, same direction: merged nodes) is left out. The result
+    is a prefix of `order`, overwritten."""
+    m = len(order)
+    run = np.empty(16, dtype=np.int64)
     k = 0
     i = 0
     while i < m:
+        first = order[i]
+        # one key, one parameter edge: the lowest edge generator
+        edge = 2**31
+        for c in codes[first]:
+            if c >= n_vertices:
+                edge = min(edge, c - n_vertices)
+        gap = edge_tol[edge]
         j = i + 1
-        while j < m and not new_key[j] and s[j] - s[i] <= max(s_tol[i], s_tol[j]):
+        while j < m and _same_key(kind, codes, first, order[j]) and s[order[j]] - s[first] <= gap:
             j += 1
-        run = k
+        if j - i > len(run):
+            run = np.empty(2 * (j - i), dtype=np.int64)
+        run[: j - i] = order[i:j]
+        begin = k
         for kept in (-1, 1):
-            for r in range(i, j):
+            for r in run[: j - i]:
                 if direction[r] != kept:
                     continue
                 repeated = False
-                for q in range(run, k):
-                    if node[result[q]] == node[r] and direction[result[q]] == kept:
+                for q in range(begin, k):
+                    if node[order[q]] == node[r] and direction[order[q]] == kept:
                         repeated = True
                         break
                 if not repeated:
-                    result[k] = r
+                    order[k] = r
                     k += 1
         i = j
-    return result[:k]
+    return order[:k]
 
 
 @njit(cache=True)
-def _pair(new_key, direction, s, node):
-    m = len(new_key)
-    out_node = np.full((m, 2), -1, dtype=np.int64)
-    out_s = np.full((m, 2), np.nan)
-    out_row = np.empty(m, dtype=np.int64)
-    out_other = np.full(m, -1, dtype=np.int64)
+def _count_arcs(order, kind, codes, direction):
+    """How many arcs `_pair` makes of the incidences in `order`."""
+    count = 0
+    pending = False
+    for i in range(len(order)):
+        r = order[i]
+        if pending and not _same_key(kind, codes, order[i - 1], r):
+            count += 1
+            pending = False
+        if direction[r] > 0:
+            if pending:
+                count += 1
+            pending = True
+        else:
+            count += 1
+            pending = False
+    return count + (1 if pending else 0)
+
+
+@njit(cache=True)
+def _pair(order, kind, codes, direction, s, node, n_arcs):
+    """Each incidence in `order` that starts an arc paired with the next one ending it, if of the same key:
+    (rows (A,) int64 the start's incidence (a dangling end's own), others (A,) int64 the end's (-1: none),
+    node (A, 2) int32 the start and end node (-1: none), s (A, 2) float64 their coordinates (nan: none))."""
+    rows = np.empty(n_arcs, dtype=np.int64)
+    others = np.full(n_arcs, -1, dtype=np.int64)
+    out_node = np.full((n_arcs, 2), -1, dtype=np.int32)
+    out_s = np.full((n_arcs, 2), np.nan)
     count = 0
     pending = -1
-    for i in range(m):
-        if new_key[i] and pending >= 0:
+    for i in range(len(order)):
+        r = order[i]
+        if pending >= 0 and not _same_key(kind, codes, order[i - 1], r):
+            rows[count] = pending
             out_node[count, 0] = node[pending]
             out_s[count, 0] = s[pending]
-            out_row[count] = pending
             count += 1
             pending = -1
-        if direction[i] > 0:
+        if direction[r] > 0:
             if pending >= 0:
+                rows[count] = pending
                 out_node[count, 0] = node[pending]
                 out_s[count, 0] = s[pending]
-                out_row[count] = pending
                 count += 1
-            pending = i
+            pending = r
+            continue
+        if pending >= 0:
+            rows[count] = pending
+            out_node[count, 0] = node[pending]
+            out_s[count, 0] = s[pending]
+            others[count] = r
+            pending = -1
         else:
-            if pending >= 0:
-                out_node[count, 0] = node[pending]
-                out_s[count, 0] = s[pending]
-                out_node[count, 1] = node[i]
-                out_s[count, 1] = s[i]
-                out_row[count] = pending
-                out_other[count] = i
-                pending = -1
-            else:
-                out_node[count, 1] = node[i]
-                out_s[count, 1] = s[i]
-                out_row[count] = i
-            count += 1
+            rows[count] = r
+        out_node[count, 1] = node[r]
+        out_s[count, 1] = s[r]
+        count += 1
     if pending >= 0:
+        rows[count] = pending
         out_node[count, 0] = node[pending]
         out_s[count, 0] = s[pending]
-        out_row[count] = pending
-        count += 1
-    return out_node[:count], out_s[:count], out_row[:count], out_other[:count]
+    return rows, others, out_node, out_s

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
+from dataclasses import fields
 
 import numpy as np
 from numba import njit
@@ -26,7 +27,7 @@ from ..raycast import CONTACT_VERTEX, _contact_arc, _perpendicular_frame
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
-from .graph import assemble_arcs, coincident_nodes
+from .graph import Arcs, assemble_arcs, coincident_nodes
 from .topology import scene_topology
 from .validation import (
     ARC_EV,
@@ -45,11 +46,14 @@ Cancel = Callable[[], bool]
 class Skeleton:
     """The skeleton of one scene, built for a set of source polygons (all of them after `complete`).
 
-    nodes: NodeChunk of every node (see core.skeleton.validation); node_line (N,) int64: the node standing for
-    each one's line (nodes on one line merged, core.skeleton.graph.coincident_nodes); arcs: core.skeleton.graph.Arcs
-    (their nodes are such representatives);
+    nodes: NodeChunk of the nodes (see core.skeleton.validation); arcs: core.skeleton.graph.Arcs;
     sources: sorted (S,) int64 polygons the skeleton is complete for, or None when complete for every line.
     Queries about a source not built yet build it first (lazily), so every answer is exact.
+
+    While partial, the skeleton keeps every node found and every node-arc incidence, to merge and pair them
+    with those of later builds: node_line (N,) int32 is then the node standing for each one's line (nodes on
+    one line merged, core.skeleton.graph.coincident_nodes), and the arcs' nodes are such representatives. Once
+    complete it keeps one node per line (node_line None) and no incidence.
     """
 
     def __init__(self, scene: Scene):
@@ -115,8 +119,8 @@ class Skeleton:
             node_parts.append(nodes)
             incidence_parts.append(
                 IncidenceChunk(
-                    incidences.node + n_nodes, incidences.kind, incidences.codes, incidences.end, incidences.s,
-                    incidences.direction,
+                    (incidences.node + n_nodes).astype(np.int32), incidences.kind, incidences.codes, incidences.end,
+                    incidences.s, incidences.direction,
                 )
             )
             n_nodes += len(nodes)
@@ -125,6 +129,9 @@ class Skeleton:
             raise CancelledError("skeleton construction cancelled")
         self._node_parts.extend(node_parts)
         self._incidence_parts.extend(incidence_parts)
+        # _finish lets each piece go once joined: no other reference may keep it
+        node_parts.clear()
+        incidence_parts.clear()
         self._n_nodes = n_nodes
         self.rejected = self.rejected + rejected
         self.sources = None if wanted is None else np.union1d(built, wanted)
@@ -137,16 +144,29 @@ class Skeleton:
         return self.build(None, progress, cancel)
 
     def _finish(self) -> None:
-        self.nodes = _concatenate_nodes(self._node_parts)
-        incidences = _concatenate_incidences(self._incidence_parts)
-        self._node_parts = [self.nodes]
-        self._incidence_parts = [incidences]
         scene = self.scene
-        self.node_line = coincident_nodes(self.nodes.start, self.nodes.direction, scene.diagonal, scene.tol.length)
-        self.arcs = assemble_arcs(
+        # the previous graph and its indexes go before the new ones are made
+        self.nodes = self.arcs = self._vertex_arcs = self._arc_free = None
+        self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
+        nodes = _concatenated(NodeChunk, self._node_parts)
+        incidences = _concatenated(IncidenceChunk, self._incidence_parts)
+        node_line = coincident_nodes(nodes.start, nodes.direction, scene.diagonal, scene.tol.length)
+        arcs = assemble_arcs(
             incidences.kind, incidences.codes, incidences.end, incidences.s, incidences.direction,
-            self.node_line[incidences.node], _parameter_tolerance(scene, incidences.codes),
+            node_line[incidences.node], _edge_tolerance(scene), scene.n_vertices,
         )  # fmt: skip
+        if self.sources is None:
+            # no later build merges nodes or pairs incidences
+            del incidences
+            nodes, arcs = _one_node_per_line(nodes, arcs, node_line)
+            self.node_line = None
+        else:
+            self._node_parts = [nodes]
+            self._incidence_parts = [incidences]
+            self.node_line = node_line
+        self._n_nodes = len(nodes)
+        self.nodes = nodes
+        self.arcs = arcs
         self._index()
 
     def _index(self) -> None:
@@ -155,23 +175,18 @@ class Skeleton:
         ev = np.flatnonzero(arcs.kind == ARC_EV)
         ev_vertex = arcs.codes[ev, 0]
         order = np.argsort(ev_vertex, kind="stable")
-        self._vertex_arcs = ev[order]
+        self._vertex_arcs = ev[order].astype(np.int32)
         self._vertex_offsets = np.zeros(n_vertices + 1, dtype=np.int64)
         self._vertex_offsets[1:] = np.cumsum(np.bincount(ev_vertex, minlength=n_vertices))
-        first, second, arc = _touch_pairs(
+        self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs = _pair_index(
             arcs.kind, arcs.codes, arcs.ends, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
-            scene.edge_face_offsets, scene.edge_faces, topo.face_group,
+            scene.edge_face_offsets, scene.edge_faces, topo.face_group, topo.n_groups,
         )  # fmt: skip
-        # emitted arc by arc, so a stable sort on the pair keeps each pair's arcs in increasing order
-        order = np.argsort(first.astype(np.int64) * topo.n_groups + second, kind="stable")
         self._arc_free = _arcs_leave_freely(
             arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
             scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
             topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, scene.tol.cosine,
         )  # fmt: skip
-        self._pair_first = first[order]
-        self._pair_second = second[order]
-        self._pair_arcs = arc[order]
 
     # ------------------------------------------------------------------------------------------------------
     # statistics
@@ -179,7 +194,7 @@ class Skeleton:
     @property
     def stats(self) -> dict:
         """nodes and arcs per type, dangling arcs, rejected candidates per reason, seconds, bytes."""
-        distinct = self.node_line == np.arange(len(self.nodes))
+        distinct = True if self.node_line is None else self.node_line == np.arange(len(self.nodes))
         nodes = {
             name: int(np.count_nonzero(distinct & (self.nodes.kind == kind))) for kind, name in NODE_NAMES.items()
         }
@@ -196,10 +211,12 @@ class Skeleton:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by nodes, arcs, kept incidences and the indexes."""
-        arrays = [*vars(self.nodes).values(), *vars(self.arcs).values(), *vars(self._incidence_parts[0]).values()]
-        arrays += [self._vertex_arcs, self._vertex_offsets, self._pair_first, self._pair_second, self._pair_arcs]
-        arrays.append(self._arc_free)
+        """Bytes held by nodes, arcs, the indexes and, while partial, every node's line and the incidences."""
+        arrays = [*vars(self.nodes).values(), *vars(self.arcs).values()]
+        arrays += [self._vertex_arcs, self._vertex_offsets, self._arc_free]
+        arrays += [self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs]
+        if self.node_line is not None:
+            arrays += [self.node_line, *vars(self._incidence_parts[0]).values()]
         return int(sum(a.nbytes for a in arrays))
 
     # ------------------------------------------------------------------------------------------------------
@@ -215,14 +232,15 @@ class Skeleton:
         return int(self.topology.face_group[polygon])
 
     def _pair(self, a: int, b: int) -> np.ndarray:
-        """(K,) the arcs joining surfaces a and b (either way round), in increasing order."""
+        """(K,) int64 the arcs joining surfaces a and b (either way round), in increasing order."""
         # keys of the index's own dtype: another one would have searchsorted convert the whole index
         a, b = np.int32(min(a, b)), np.int32(max(a, b))
         lo = np.searchsorted(self._pair_first, a, side="left")
         hi = np.searchsorted(self._pair_first, a, side="right")
-        inner = self._pair_second[lo:hi]
-        arcs = self._pair_arcs[lo + np.searchsorted(inner, b, side="left") : lo + np.searchsorted(inner, b, "right")]
-        return arcs.astype(np.int64)
+        k = lo + np.searchsorted(self._pair_second[lo:hi], b, side="left")
+        if k == hi or self._pair_second[k] != b:
+            return np.empty(0, dtype=np.int64)
+        return self._pair_arcs[self._pair_offsets[k] : self._pair_offsets[k + 1]].astype(np.int64)
 
     def interactions(self, polygon: int) -> np.ndarray:
         """Sorted (K,) int64 polygons that `polygon` sees: some critical line joins them (section 4.4)."""
@@ -467,32 +485,46 @@ def _polygon_ids(scene: Scene, sources: Iterable[int]) -> np.ndarray:
     return ids
 
 
-def _parameter_tolerance(scene: Scene, codes: np.ndarray) -> np.ndarray:
-    """(M,) the tolerance length as a parameter on each arc's parameter edge (its lowest edge generator)."""
-    nv = scene.n_vertices
-    param = np.where(codes >= nv, codes, np.iinfo(np.int64).max).min(axis=1) - nv
-    ends = scene.vertices[scene.edges[param]]
+def _edge_tolerance(scene: Scene) -> np.ndarray:
+    """(E,) the tolerance length as a parameter along each edge."""
+    ends = scene.vertices[scene.edges]
     return scene.tol.length / np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
 
 
-def _concatenate_nodes(parts: list[NodeChunk]) -> NodeChunk:
-    if not parts:
-        return NodeChunk(
-            np.empty(0, np.int8), np.zeros((0, 4), np.int8), np.full((0, 4), -1, np.int32), np.empty((0, 3)),
-            np.empty((0, 3)), np.empty((0, 4)), np.empty((0, 2), np.int32),
-        )  # fmt: skip
-    fields = vars(parts[0]).keys()
-    return NodeChunk(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in fields})
+_EMPTY = {
+    NodeChunk: lambda: NodeChunk(
+        np.empty(0, np.int8), np.zeros((0, 4), np.int8), np.full((0, 4), -1, np.int32), np.empty((0, 3)),
+        np.empty((0, 3)), np.empty((0, 4)), np.empty((0, 2), np.int32),
+    ),
+    IncidenceChunk: lambda: IncidenceChunk(
+        np.empty(0, np.int32), np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32),
+        np.empty(0), np.empty(0, np.int8),
+    ),
+}  # fmt: skip
 
 
-def _concatenate_incidences(parts: list[IncidenceChunk]) -> IncidenceChunk:
+def _concatenated(chunk_type, parts: list):
+    """One chunk_type (NodeChunk or IncidenceChunk) holding the rows of `parts` in order. Empties `parts` and
+    lets each column's pieces go once they are joined: all the pieces and all the joined columns at once would
+    double the memory of a build."""
     if not parts:
-        return IncidenceChunk(
-            np.empty(0, np.int64), np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32),
-            np.empty(0), np.empty(0, np.int8),
-        )  # fmt: skip
-    fields = vars(parts[0]).keys()
-    return IncidenceChunk(**{name: np.concatenate([getattr(p, name) for p in parts]) for name in fields})
+        return _EMPTY[chunk_type]()
+    if len(parts) == 1:
+        return parts.pop()
+    columns = {field.name: [getattr(part, field.name) for part in parts] for field in fields(chunk_type)}
+    parts.clear()
+    return chunk_type(**{name: np.concatenate(columns.pop(name)) for name in list(columns)})
+
+
+def _one_node_per_line(nodes: NodeChunk, arcs: Arcs, node_line: np.ndarray) -> tuple[NodeChunk, Arcs]:
+    """The nodes standing for their line (node_line (N,): see Skeleton) and the arcs, whose nodes are such
+    representatives, with their node ids renumbered to them."""
+    kept = np.flatnonzero(node_line == np.arange(len(node_line)))
+    renumber = np.full(len(node_line), -1, dtype=np.int32)
+    renumber[kept] = np.arange(len(kept), dtype=np.int32)
+    node = np.where(arcs.node >= 0, renumber[arcs.node], -1).astype(np.int32)
+    arcs = Arcs(arcs.kind, arcs.codes, node, arcs.s, arcs.ends)
+    return NodeChunk(**{name: values[kept] for name, values in vars(nodes).items()}), arcs
 
 
 def _element_faces(scene: Scene, topology, code: int) -> np.ndarray:
@@ -510,58 +542,99 @@ def _polygons_of_groups(topology, groups: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _touch_pairs(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group):
-    """For every arc, the (surface, surface) pairs it joins, each once as (lower, higher) int32: the surfaces
-    touched at each end are the ones its lines end on (as found at either node, ends (A, 2, 2)) and those
-    around its outer generator (the lines graze it or stop on it). Returns (first, second, arc), arc by arc."""
-    count = 0
-    for arc in range(kind.shape[0]):
-        last = 1 if kind[arc] == ARC_EV else 2
-        sizes = np.zeros(2, dtype=np.int64)
-        for side in range(2):
-            code = codes[arc, 0 if side == 0 else last]
-            sizes[side] = 2 + (vf_off[code + 1] - vf_off[code] if code < n_vertices else
-                               ef_off[code - n_vertices + 1] - ef_off[code - n_vertices])
-        count += sizes[0] * sizes[1]
-    first = np.empty(count, dtype=np.int32)
-    second = np.empty(count, dtype=np.int32)
-    owner = np.empty(count, dtype=np.int32)
+def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, n_groups):
+    """The arcs joining each pair of surfaces (face groups), CSR: first (P,) int32 < second (P,) int32 the
+    distinct pairs sorted by first then second, offsets (P + 1,) int64 into arcs (R,) int32, each pair's arcs
+    in increasing order. Filled by a counting sort on the first surface: a sort on (pair, arc) rows would
+    hold several copies of them, the largest arrays of a build."""
     touched = np.empty((2, 64), dtype=np.int64)
-    n = 0
+    found = np.empty((2, 64 * 64), dtype=np.int64)
+    bucket = np.zeros(n_groups + 1, dtype=np.int64)
     for arc in range(kind.shape[0]):
-        last = 1 if kind[arc] == ARC_EV else 2
-        sizes = np.zeros(2, dtype=np.int64)
-        for side in range(2):
-            code = codes[arc, 0 if side == 0 else last]
-            for node in range(2):
-                if ends[arc, node, side] >= 0:
-                    sizes[side] = _add_unique(touched[side], sizes[side], ends[arc, node, side])
-            if code < n_vertices:
-                for i in range(vf_off[code], vf_off[code + 1]):
-                    sizes[side] = _add_unique(touched[side], sizes[side], face_group[vf_face[i]])
-            else:
-                e = code - n_vertices
-                for i in range(ef_off[e], ef_off[e + 1]):
-                    sizes[side] = _add_unique(touched[side], sizes[side], face_group[ef_face[i]])
-        begin = n
-        for i in range(sizes[0]):
-            for j in range(sizes[1]):
-                a = min(touched[0, i], touched[1, j])
-                b = max(touched[0, i], touched[1, j])
-                if a == b:
-                    continue
-                seen = False
-                for k in range(begin, n):
-                    if first[k] == a and second[k] == b:
-                        seen = True
-                        break
-                if seen:
-                    continue
-                first[n] = a
-                second[n] = b
-                owner[n] = arc
+        for k in range(_arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
+                                  face_group, touched, found)):  # fmt: skip
+            bucket[found[0, k] + 1] += 1
+    bucket = np.cumsum(bucket)
+    fill = bucket[:-1].copy()
+    second = np.empty(bucket[-1], dtype=np.int32)
+    arcs = np.empty(bucket[-1], dtype=np.int32)
+    for arc in range(kind.shape[0]):
+        for k in range(_arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
+                                  face_group, touched, found)):  # fmt: skip
+            row = fill[found[0, k]]
+            second[row] = found[1, k]
+            arcs[row] = arc
+            fill[found[0, k]] += 1
+    n_pairs = 0
+    for group in range(n_groups):
+        lo, hi = bucket[group], bucket[group + 1]
+        # stable: each pair's arcs stay in the increasing order they were entered in
+        order = np.argsort(second[lo:hi], kind="mergesort")
+        second[lo:hi] = second[lo:hi][order]
+        arcs[lo:hi] = arcs[lo:hi][order]
+        for row in range(lo, hi):
+            if row == lo or second[row] != second[row - 1]:
+                n_pairs += 1
+    first = np.empty(n_pairs, dtype=np.int32)
+    distinct = np.empty(n_pairs, dtype=np.int32)
+    offsets = np.empty(n_pairs + 1, dtype=np.int64)
+    pair = 0
+    for group in range(n_groups):
+        for row in range(bucket[group], bucket[group + 1]):
+            if row == bucket[group] or second[row] != second[row - 1]:
+                first[pair] = group
+                distinct[pair] = second[row]
+                offsets[pair] = row
+                pair += 1
+    offsets[n_pairs] = len(arcs)
+    return first, distinct, offsets, arcs
+
+
+@njit(cache=True)
+def _arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, touched, found):
+    """The (surface, surface) pairs arc `arc` joins, each once as (lower, higher), into found (2, K); returns
+    K. The surfaces touched at each end are the ones its lines end on (as found at either node, ends (A, 2,
+    2)) and those around its outer generator (the lines graze it or stop on it); touched (2, 64) scratch."""
+    last = 1 if kind[arc] == ARC_EV else 2
+    sizes = (
+        _touched(codes[arc, 0], ends[arc, 0, 0], ends[arc, 1, 0], n_vertices, vf_off, vf_face, ef_off, ef_face,
+                 face_group, touched[0]),
+        _touched(codes[arc, last], ends[arc, 0, 1], ends[arc, 1, 1], n_vertices, vf_off, vf_face, ef_off, ef_face,
+                 face_group, touched[1]),
+    )  # fmt: skip
+    n = 0
+    for i in range(sizes[0]):
+        for j in range(sizes[1]):
+            a = min(touched[0, i], touched[1, j])
+            b = max(touched[0, i], touched[1, j])
+            if a == b:
+                continue
+            seen = False
+            for k in range(n):
+                if found[0, k] == a and found[1, k] == b:
+                    seen = True
+                    break
+            if not seen:
+                found[0, n] = a
+                found[1, n] = b
                 n += 1
-    return first[:n], second[:n], owner[:n]
+    return n
+
+
+@njit(cache=True)
+def _touched(code, end_at_start, end_at_end, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, out):
+    """The surfaces an arc's lines touch beyond generator `code`, into out; returns how many."""
+    count = 0
+    for end in (end_at_start, end_at_end):
+        if end >= 0:
+            count = _add_unique(out, count, end)
+    if code < n_vertices:
+        for i in range(vf_off[code], vf_off[code + 1]):
+            count = _add_unique(out, count, face_group[vf_face[i]])
+    else:
+        for i in range(ef_off[code - n_vertices], ef_off[code - n_vertices + 1]):
+            count = _add_unique(out, count, face_group[ef_face[i]])
+    return count
 
 
 @njit(cache=True)
