@@ -1441,6 +1441,70 @@ def _curve_meets(c0, c1, c2, c3, poly, count, slack):
 
 
 @njit(cache=True)
+def _bilinear_range(c0, c1, c2, c3, poly, count):
+    """(lo, hi): the range of c0 + c1 s + c2 t + c3 s t over the convex polygon poly[:count] of the (s, t)
+    plane (harmonic: reached on the boundary, a quadratic along each side)."""
+    lo = np.inf
+    hi = -np.inf
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        ps = poly[k, 0]
+        pt = poly[k, 1]
+        ds = poly[k2, 0] - ps
+        dt = poly[k2, 1] - pt
+        f = c0 + c1 * ps + c2 * pt + c3 * ps * pt
+        lo = min(lo, f)
+        hi = max(hi, f)
+        qa = c3 * ds * dt
+        qb = c1 * ds + c2 * dt + c3 * (ps * dt + pt * ds)
+        if qa != 0.0:
+            tau = -qb / (2.0 * qa)
+            if 0.0 < tau < 1.0:
+                fm = f + qb * tau + qa * tau * tau
+                lo = min(lo, fm)
+                hi = max(hi, fm)
+    return lo, hi
+
+
+@njit(cache=True)
+def _family_may_cross(ea, ed, h, xd, region, count, src, points, offsets, tol):
+    """Whether some line E(s) X(t) of region[:count] (E(s) = ea + s ed, X(t) = ea + h + t xd) may cross one
+    of the polygons `src` within tol; False only when none can (a lazy build's pruning of a pivot).
+
+    A line crosses a convex polygon when it passes on one side of all its edge lines: the side of the line
+    through E and X against the edge P P' is (X - E) . ((P - E) x (P' - E)), bilinear in (s, t) (its s^2 term
+    is ed . (ed x (P' - P)) = 0). Its value is the lines' distance times |(X - E) x (P' - P)|: a line within
+    tol of the polygon (in its plane, say) gets values within tol |X - E| |P' - P| of the right sign."""
+    reach = np.sqrt(_dot(h, h)) + np.sqrt(_dot(xd, xd)) + np.sqrt(_dot(ed, ed))
+    for p in src:
+        first = offsets[p]
+        count_p = offsets[p + 1] - first
+        can_positive = True
+        can_negative = True
+        for k in range(count_p):
+            a = points[first + k] - ea
+            b = points[first + (k + 1) % count_p] - ea
+            side = b - a
+            big = _cross(a, b)
+            small = -_cross(ed, side)
+            c0 = _dot(h, big)
+            c1 = _dot(h, small) - _dot(ed, big)
+            c2 = _dot(xd, big)
+            c3 = _dot(xd, small)
+            slack = 2.0 * tol * reach * np.sqrt(_dot(side, side)) + 1e-9 * (abs(c0) + abs(c1) + abs(c2) + abs(c3))
+            lo, hi = _bilinear_range(c0, c1, c2, c3, region, count)
+            if hi < -slack:
+                can_positive = False
+            if lo > slack:
+                can_negative = False
+            if not (can_positive or can_negative):
+                break
+        if can_positive or can_negative:
+            return True
+    return False
+
+
+@njit(cache=True)
 def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
     """The common zeros (s, t) of c0 + c1 s + c2 t + c3 s t and k0 + k1 s + k2 t + k3 s t, written to roots
     (2, 2); returns how many (0 also when the two curves coincide: infinitely many lines, no node)."""
@@ -1625,6 +1689,8 @@ def _edge_candidates(
                     continue
                 h = rel[sx]
                 xd = along[sx]
+                if lazy and not _family_may_cross(ea, ed, h, xd, region, k_count, src, points, offsets, tol):
+                    continue
                 n_chosen = 0
                 for yi in range(xi + 1, g1):
                     ry = order[yi]
