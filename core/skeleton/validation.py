@@ -457,15 +457,16 @@ def _relaxed_arc(
     points, offsets, normals, areas, vertices, edges, n_vertices,
     vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol, plane_offsets,
-    r_kind, r_id, r_group, n_retained, norm_index, norm_dir, sigma,
+    r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
     sl_poly, sl_a, sl_b, n_sliding, object_ids,
     polys, kinds, locals_, arc_start, arc_len, codes,
 ):  # fmt: skip
     """One arc adjacent to a node: the retained generators r_* (n_retained of them, in any order), the
-    motion normalised by sliding retained edge `norm_index` by sigma * norm_dir. Fills codes (3,) with the
-    generators in canonical line order; returns (ok, arc kind, end before, end after, s, direction) where s is
-    the node's coordinate on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
-    vertex) and direction +1 when the arc extends towards larger s."""
+    motion normalised by sliding retained edge `norm_index` by sigma * norm_dir; r_pin (3,) int64: for a
+    retained edge met at one of its vertices, that vertex (its contact must move into the edge), else -1.
+    Fills codes (3,) with the generators in canonical line order; returns (ok, arc kind, end before, end
+    after, s, direction) where s is the node's coordinate on the arc's parameter edge (its lowest retained
+    edge id, 0..1 from its first vertex) and direction +1 when the arc extends towards larger s."""
     f1, f2 = _perpendicular_frame(u)
     m = np.zeros((4, 4))
     rhs = np.zeros(4)
@@ -637,6 +638,9 @@ def _relaxed_arc(
             if w1 * w1 + w2 * w2 <= 1e-24:
                 return False, 0, 0, 0, 0.0, 0
             slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
+            # an edge met at its end vertex only holds the lines whose contact moves into it
+            if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
+                return False, 0, 0, 0, 0.0, 0
             generator_shift = slide * _dot(d, u)
             nearest = np.inf
             side = 1 if g == last else 0
@@ -661,8 +665,16 @@ def _relaxed_arc(
                 )
                 if not inside:
                     continue
-                beyond = max(-ahead, 0.0)
                 travel = u if g == last else -u
+                # an edge lying on the face (objects in contact) reached from behind the face: the lines between
+                # the generators run inside the other object (a box's bottom edge overhanging the top of the box
+                # it stands on, seen from under that top), or behind a panel that hides the edge from them. Only
+                # where the contact moves: lines kept through one point (where the edge crosses the face's side)
+                # cross the face's plane on its boundary, whatever rounding says
+                if ahead >= -_SIDE_EPS and _dot(normals[c_poly[i]], travel) > angle_tol and \
+                        _dot(delta, delta) > _SIDE_EPS * _SIDE_EPS:  # fmt: skip
+                    return False, 0, 0, 0, 0.0, 0
+                beyond = max(-ahead, 0.0)
                 if _meets_first(normals, areas, c_poly[i], beyond, behind[side], nearest, travel):
                     nearest = beyond
                     behind[side] = c_poly[i]
@@ -799,6 +811,11 @@ def _validate_chunk(
             # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions; of an
             # outer vertex replaced by an edge through it: 2 sides x 2 directions
             bound += 12
+        if cand_vertices[c, 1] >= 0:
+            # EEE arcs of two vertices and an edge beyond: 2 sides x an edge of each vertex
+            v = cand_vertices[c, 0]
+            w = cand_vertices[c, 1]
+            bound += 2 * (ve_off[v + 1] - ve_off[v]) * (ve_off[w + 1] - ve_off[w])
     node_cand = np.empty(n_cand, dtype=np.int64)
     node_kind = np.empty(n_cand, dtype=np.int8)
     node_gkind = np.zeros((n_cand, 4), dtype=np.int8)
@@ -842,6 +859,7 @@ def _validate_chunk(
     r_kind = np.zeros(3, dtype=np.int8)
     r_id = np.zeros(3, dtype=np.int64)
     r_group = np.zeros(3, dtype=np.int64)
+    r_pin = np.full(3, -1, dtype=np.int64)
     codes = np.zeros(3, dtype=np.int64)
 
     n_nodes = 0
@@ -1049,7 +1067,7 @@ def _validate_chunk(
                     points, offsets, normals, areas, vertices, edges, n_vertices,
                     vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                    plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
+                    plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, sigma,
                     sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                 )  # fmt: skip
                 if not ok:
@@ -1102,9 +1120,40 @@ def _validate_chunk(
                         points, offsets, normals, areas, vertices, edges, n_vertices,
                         vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                         c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
+                        plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, sigma,
                         sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                     )  # fmt: skip
+                    if not ok:
+                        continue
+                    n_inc = _record_incidence(
+                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
+                        direction,
+                    )  # fmt: skip
+            # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
+            # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
+            # from it, the second's must follow into its edge from its vertex
+            if ng != 2:
+                continue
+            for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
+                e_slide = ve_edge[slot]
+                if not edge_mask[e_slide] or e_slide == extra:
+                    continue
+                for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
+                    e_pin = ve_edge[other]
+                    if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
+                        continue
+                    r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
+                    r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
+                    r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
+                    norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
+                    ok, kind, e0, e1, s, direction = _relaxed_arc(
+                        points, offsets, normals, areas, vertices, edges, n_vertices,
+                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
+                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
+                        plane_offsets, r_kind, r_id, r_group, r_pin, 3, 0, norm_dir, 1.0,
+                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
+                    )  # fmt: skip
+                    r_pin[1] = -1
                     if not ok:
                         continue
                     n_inc = _record_incidence(
@@ -1134,7 +1183,7 @@ def _validate_chunk(
                         points, offsets, normals, areas, vertices, edges, n_vertices,
                         vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                         c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, sigma,
+                        plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, sigma,
                         sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                     )  # fmt: skip
                     if not ok:
@@ -1169,7 +1218,7 @@ def _validate_chunk(
                         points, offsets, normals, areas, vertices, edges, n_vertices,
                         vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
                         c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, n_retained, norm, norm_dir, 1.0,
+                        plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, 1.0,
                         sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
                     )  # fmt: skip
                     if not ok:

@@ -694,3 +694,22 @@ def _overlaps_in_plane(start, end, corners, normal, tol) -> bool:
         s = (-tol - a) / (b - a)
         lo, hi = (max(lo, s), hi) if b > a else (lo, min(hi, s))
     return (hi - lo) * float(np.linalg.norm(end - start)) > tol
+
+
+def swath_line(vertices: np.ndarray, edges: np.ndarray, codes, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The line of a skeleton arc with generator codes `codes` (vertex v -> v, edge e -> len(vertices) + e,
+    -1 padded) at coordinate s of its parameter edge (its lowest edge, 0..1 from that edge's first vertex):
+    (point (3,) on the parameter edge, unit direction (3,)). An EV arc's line joins that point to its vertex;
+    an EEE arc's line is where the planes through that point and each other edge meet."""
+    n_vertices = len(vertices)
+    codes = [int(c) for c in codes if c >= 0]
+    edge_ids = sorted(c - n_vertices for c in codes if c >= n_vertices)
+    a, b = vertices[edges[edge_ids[0]]]
+    point = a + s * (b - a)
+    vertex_ids = [c for c in codes if c < n_vertices]
+    if vertex_ids:
+        direction = vertices[vertex_ids[0]] - point
+    else:
+        planes = [np.cross(vertices[edges[e, 0]] - point, vertices[edges[e, 1]] - point) for e in edge_ids[1:]]
+        direction = np.cross(planes[0], planes[1])
+    return point, direction / np.linalg.norm(direction)

@@ -22,6 +22,7 @@ from core.skeleton import build_skeleton
 from core.skeleton.validation import ARC_EV
 from core.visibility import exact_form_factors
 from tests.core.furnished_rooms import furnished_room
+from tests.core.naive_skeleton import swath_line
 from tests.core.skeleton_scenes import box_over_floor_scene, boxes_in_room, generic_closed_room, lamp_table_scene
 
 EXACT = 1e-9
@@ -49,6 +50,11 @@ SCENES = {
     "box on box": lambda: boxes_in_room([((1.0, 1.0, 0.0), (2.6, 2.2, 0.75)), ((1.3, 1.4, 0.75), (1.55, 1.6, 1.0))]),
     # a box in the room's corner: its corner is the room's, its bottom edges lie on the room's floor edges
     "box in corner": lambda: boxes_in_room([((0.0, 0.0, 0.0), (0.7, 0.6, 0.6))]),
+    # a box stacked flush with one side of the box under it: lines through a top corner of the upper box and a
+    # corner of the room also meet a floor edge of the room
+    "boxes stacked flush": lambda: boxes_in_room(
+        [((1.0, 1.0, 0.0), (2.0, 2.0, 0.6)), ((1.0, 1.2, 0.6), (1.7, 1.8, 1.0))]
+    ),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
@@ -177,7 +183,9 @@ def test_view_arcs_have_both_end_nodes(name):
     assert (arcs.node[ev] < len(skeleton.nodes)).all()
 
 
-@pytest.mark.parametrize("name", ["generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS, "box on box"])
+@pytest.mark.parametrize(
+    "name", ["generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS, "box on box", "boxes stacked flush"]
+)
 def test_no_dangling_arc_in_closed_rooms(name):
     """Every arc, EV and EEE, has both end nodes: EEE swaths turning into a face's plane end at its FEE / EFE
     nodes (seed 003, appendix 7.1)."""
@@ -187,6 +195,51 @@ def test_no_dangling_arc_in_closed_rooms(name):
     assert not arcs.dangling.any(), f"{np.count_nonzero(arcs.dangling)} of {len(arcs)} arcs dangle"
     assert (arcs.node < len(skeleton.nodes)).all()
     assert skeleton.stats["dangling_arcs"] == 0
+
+
+@pytest.mark.parametrize("name", ["box on box", "boxes stacked flush", "furnished room 0"])
+def test_no_arc_reaches_an_edge_from_behind_the_face_it_lies_on(name):
+    """An edge lying on another object's face (a box's bottom edge on the top of the box under it) is reached
+    by free lines from the front of that face only: lines reaching it from behind run inside that object."""
+    scene, arcs = _scene(name), _skeleton(name).arcs
+    tol = 16.0 * scene.tol.length
+    nv = scene.n_vertices
+    checked = 0
+    for arc in np.flatnonzero(~arcs.dangling):
+        codes = arcs.codes[arc][arcs.codes[arc] >= 0]
+        point, direction = swath_line(scene.vertices, scene.edges, codes, 0.5 * (arcs.s[arc, 0] + arcs.s[arc, 1]))
+        # each generator's position along the line (an edge's: where the line meets it)
+        along = {}
+        for code in codes:
+            if code < nv:
+                along[code] = float((scene.vertices[code] - point) @ direction)
+            else:
+                a, b = scene.vertices[scene.edges[code - nv]]
+                normal = np.cross(direction, np.cross(b - a, direction))
+                along[code] = float((a + (normal @ (point - a)) / (normal @ (b - a)) * (b - a) - point) @ direction)
+        middle = np.mean(list(along.values()))
+        for code in codes[codes >= nv]:
+            ends = scene.vertices[scene.edges[code - nv]]
+            contact = point + along[code] * direction
+            owner = scene.object_ids[scene.edge_faces[scene.edge_face_offsets[code - nv]]]
+            for face in range(scene.n_polygons):
+                normal, offset = scene.normals[face], scene.plane_offsets[face]
+                if scene.object_ids[face] == owner or np.abs(ends @ normal + offset).max() > tol:
+                    continue
+                if abs(direction @ normal) < 1e-6 or not _strictly_inside(scene, face, contact, tol):
+                    continue
+                checked += 1
+                towards_others = middle - along[code]
+                assert towards_others * (direction @ normal) > 0.0, f"arc {arc}: edge {code - nv} behind face {face}"
+    assert checked > 0
+
+
+def _strictly_inside(scene: Scene, face: int, point: np.ndarray, tol: float) -> bool:
+    corners = scene.polygon(face)
+    sides = np.roll(corners, -1, axis=0) - corners
+    inward = np.cross(scene.normals[face], sides)
+    inward /= np.linalg.norm(inward, axis=1)[:, None]
+    return bool((np.einsum("kj,kj->k", point - corners, inward) > tol).all())
 
 
 # ----------------------------------------------------------------------------------------------------------
