@@ -61,19 +61,29 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     n = len(start)
     if n == 0:
         return np.empty(0, dtype=np.int32)
+    radius = tol / scale
     # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene. Each line
-    # is entered with both orientations (no sign convention is safe where two components tie, a diagonal).
-    # The keys are written in place: stacked copies of them set the peak memory of a build
-    keys = np.empty((2 * n, 6))
+    # is entered with its largest direction component positive; two directions within the radius have the
+    # same largest component unless the two largest of either tie within twice the radius (a diagonal): those
+    # lines are entered with both orientations. Keys are written in place, the peak memory of a build
+    magnitude = np.sort(np.abs(direction), axis=1)
+    tied = np.flatnonzero(magnitude[:, 2] - magnitude[:, 1] <= 2.0 * radius)
+    del magnitude
+    keys = np.empty((n + len(tied), 6))
     keys[:n, :3] = start
     keys[:n, :3] -= np.einsum("ij,ij->i", start, direction)[:, None] * direction
     keys[:n, :3] /= scale
-    keys[n:, :3] = keys[:n, :3]
     keys[:n, 3:] = direction
-    np.negative(direction, out=keys[n:, 3:])
-    pairs = cKDTree(keys).query_pairs(tol / scale, output_type="ndarray")
+    flip = np.take_along_axis(direction, np.abs(direction).argmax(axis=1)[:, None], axis=1)[:, 0] < 0.0
+    np.negative(keys[:n, 3:], out=keys[:n, 3:], where=flip[:, None])
+    del flip
+    keys[n:, :3] = keys[tied, :3]
+    keys[n:, 3:] = -keys[tied, 3:]
+    pairs = cKDTree(keys).query_pairs(radius, output_type="ndarray")
     del keys
-    pairs %= n
+    again = pairs >= n
+    pairs[again] = tied[pairs[again] - n]
+    del again
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if len(pairs) == 0:
         return np.arange(n, dtype=np.int32)

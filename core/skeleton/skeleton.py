@@ -13,6 +13,7 @@ arcs by vertex -> the arcs through that vertex (its views of every polygon).
 
 from __future__ import annotations
 
+import ctypes
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import fields
@@ -27,7 +28,7 @@ from ..raycast import CONTACT_VERTEX, _contact_arc, _perpendicular_frame
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
-from .graph import Arcs, assemble_arcs, coincident_nodes
+from .graph import assemble_arcs, coincident_nodes
 from .topology import scene_topology
 from .validation import (
     ARC_EV,
@@ -41,6 +42,19 @@ from .validation import (
 
 Progress = Callable[[str, float], None]
 Cancel = Callable[[], bool]
+
+try:
+    _malloc_trim = ctypes.CDLL("libc.so.6").malloc_trim
+except (OSError, AttributeError):
+    _malloc_trim = None
+
+
+def _return_free_memory() -> None:
+    """Hand the free pages of the C heap back to the system (glibc only). A build allocates and frees many
+    arrays below malloc's mmap threshold (the kernels' worst-case buffers, the pieces joined at the end):
+    malloc keeps their pages, and the resident memory of the process (Blender's) stays at its peak."""
+    if _malloc_trim is not None:
+        _malloc_trim(0)
 
 
 class Skeleton:
@@ -124,6 +138,8 @@ class Skeleton:
                 )
             )
             n_nodes += len(nodes)
+            del candidates, nodes, incidences
+            _return_free_memory()
             yield fraction
         if cancel is not None and cancel():
             raise CancelledError("skeleton construction cancelled")
@@ -149,25 +165,34 @@ class Skeleton:
         self.nodes = self.arcs = self._vertex_arcs = self._arc_free = None
         self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
         nodes = _concatenated(NodeChunk, self._node_parts)
-        incidences = _concatenated(IncidenceChunk, self._incidence_parts)
+        _return_free_memory()
         node_line = coincident_nodes(nodes.start, nodes.direction, scene.diagonal, scene.tol.length)
-        arcs = assemble_arcs(
+        complete = self.sources is None
+        if complete:
+            # no later build merges nodes or pairs incidences: the duplicates go before the incidences are joined
+            nodes, node_id = _one_node_per_line(nodes, node_line)
+            del node_line
+        else:
+            node_id = node_line
+        _return_free_memory()
+        incidences = _concatenated(IncidenceChunk, self._incidence_parts)
+        _return_free_memory()
+        self.arcs = assemble_arcs(
             incidences.kind, incidences.codes, incidences.end, incidences.s, incidences.direction,
-            node_line[incidences.node], _edge_tolerance(scene), scene.n_vertices,
+            node_id[incidences.node], _edge_tolerance(scene), scene.n_vertices,
         )  # fmt: skip
-        if self.sources is None:
-            # no later build merges nodes or pairs incidences
-            del incidences
-            nodes, arcs = _one_node_per_line(nodes, arcs, node_line)
+        if complete:
+            del incidences, node_id
             self.node_line = None
         else:
             self._node_parts = [nodes]
             self._incidence_parts = [incidences]
-            self.node_line = node_line
+            self.node_line = node_id
         self._n_nodes = len(nodes)
         self.nodes = nodes
-        self.arcs = arcs
+        _return_free_memory()
         self._index()
+        _return_free_memory()
 
     def _index(self) -> None:
         scene, topo, arcs = self.scene, self.topology, self.arcs
@@ -516,15 +541,12 @@ def _concatenated(chunk_type, parts: list):
     return chunk_type(**{name: np.concatenate(columns.pop(name)) for name in list(columns)})
 
 
-def _one_node_per_line(nodes: NodeChunk, arcs: Arcs, node_line: np.ndarray) -> tuple[NodeChunk, Arcs]:
-    """The nodes standing for their line (node_line (N,): see Skeleton) and the arcs, whose nodes are such
-    representatives, with their node ids renumbered to them."""
-    kept = np.flatnonzero(node_line == np.arange(len(node_line)))
-    renumber = np.full(len(node_line), -1, dtype=np.int32)
-    renumber[kept] = np.arange(len(kept), dtype=np.int32)
-    node = np.where(arcs.node >= 0, renumber[arcs.node], -1).astype(np.int32)
-    arcs = Arcs(arcs.kind, arcs.codes, node, arcs.s, arcs.ends)
-    return NodeChunk(**{name: values[kept] for name, values in vars(nodes).items()}), arcs
+def _one_node_per_line(nodes: NodeChunk, node_line: np.ndarray) -> tuple[NodeChunk, np.ndarray]:
+    """The nodes standing for their line (node_line (N,): see Skeleton), and (N,) int32 the id among them of
+    each node's line."""
+    kept = node_line == np.arange(len(node_line))
+    line_id = np.cumsum(kept, dtype=np.int32) - 1
+    return NodeChunk(**{name: values[kept] for name, values in vars(nodes).items()}), line_id[node_line]
 
 
 def _element_faces(scene: Scene, topology, code: int) -> np.ndarray:
