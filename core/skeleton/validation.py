@@ -808,8 +808,8 @@ def _validate_chunk(
             if cand_edges[c, k] >= 0:
                 bound += 2
         if cand_vertices[c, 0] >= 0:
-            # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions; of an
-            # outer vertex replaced by an edge through it: 2 sides x 2 directions
+            # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions; of a
+            # vertex replaced by an edge through it: up to 2 vertices x 2 directions
             bound += 12
         if cand_vertices[c, 1] >= 0:
             # EEE arcs of two vertices and an edge beyond: 2 sides x an edge of each vertex
@@ -1032,14 +1032,12 @@ def _validate_chunk(
                     break
                 g = g - 1 if side == 0 else g + 1
 
-        # an outer vertex generator lying on another element's edge (a box's corner on the room's floor edge,
-        # on the top edge of the box it stands on): the arcs along that edge through the vertex's point start
-        # or end here as well, so the vertex is replaced by the edge, sliding either way
-        for side in range(2):
-            if ng > 3:
-                break
-            j = 0 if side == 0 else ng - 1
-            if gk[j] != GEN_VERTEX:
+        # a vertex generator lying on another element's edge (a box's corner on the room's floor edge, on the
+        # top edge of the box it stands on, on the collinear edge of a box beside it): the arcs along that edge
+        # through the vertex's point start or end here as well, so the vertex is replaced by the edge, sliding
+        # either way
+        for j in range(ng):
+            if ng > 3 or gk[j] != GEN_VERTEX:
                 continue
             g = gg[j]
             extra = -1

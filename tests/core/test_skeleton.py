@@ -55,6 +55,11 @@ SCENES = {
     "boxes stacked flush": lambda: boxes_in_room(
         [((1.0, 1.0, 0.0), (2.0, 2.0, 0.6)), ((1.0, 1.2, 0.6), (1.7, 1.8, 1.0))]
     ),
+    # two boxes of one height side by side: their top and bottom edges at the contact are collinear and overlap,
+    # so each box's corner at the ends of the overlap lies on the other box's edge
+    "boxes side by side": lambda: boxes_in_room(
+        [((1.0, 1.0, 0.0), (2.0, 2.0, 0.6)), ((2.0, 1.3, 0.0), (2.5, 2.4, 0.6))]
+    ),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
@@ -184,8 +189,12 @@ def test_view_arcs_have_both_end_nodes(name):
 
 
 @pytest.mark.parametrize(
-    "name", ["generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS, "box on box", "boxes stacked flush"]
-)
+    "name",
+    [
+        "generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS, "box on box", "boxes stacked flush",
+        "boxes side by side",
+    ],
+)  # fmt: skip
 def test_no_dangling_arc_in_closed_rooms(name):
     """Every arc, EV and EEE, has both end nodes: EEE swaths turning into a face's plane end at its FEE / EFE
     nodes (seed 003, appendix 7.1)."""
