@@ -898,11 +898,13 @@ def _line_meets(origin, d, src, points, offsets, normals, plane_offsets, edge_ou
 
 @njit(cache=True)
 def _register(
-    q, nb, depth, use_mask, mask, ends, target_ids, n, margin, eps, keys, targets, sides, count,
+    q, nb, depth, use_mask, mask, ends, target_ids, n, margin, eps, keys, targets, sides, bits, count,
 ):  # fmt: skip
-    """Append (key, target, side) for every cell of every bin through which target edge ends[t] (2, 3) may be
-    reached from the bin within the cell's depth bound. key = b * 3 n n + cell; side 0 along the canonical
-    direction. Grows the arrays when full; returns (keys, targets, sides, count)."""
+    """Append (key, target, side, bits) for every cell of every bin through which target edge ends[t] (2, 3)
+    may be reached from the bin within the cell's depth bound. key = b * 3 n n + cell; side 0 along the
+    canonical direction; bits (uint64) the sub-cells of an 8 x 8 split of the cell that the directions from
+    the bin to the target reach (_sub_cells). Grows the arrays when full; returns (keys, targets, sides, bits,
+    count)."""
     quad = np.empty((4, 3))
     buf_a = np.empty((_CLIP, 3))
     buf_b = np.empty((_CLIP, 3))
@@ -925,10 +927,12 @@ def _register(
                 quad[1, c] = ends[t, 1, c] - q[b, c]
                 quad[2, c] = ends[t, 1, c] - q[b + 1, c]
                 quad[3, c] = ends[t, 0, c] - q[b + 1, c]
-            if reach < np.inf:
-                closest = _polygon_distance(quad, corners)
-                if closest > reach + margin:
-                    continue
+            closest = _polygon_distance(quad, corners)
+            if closest > reach + margin:
+                continue
+            # lines meeting the target within the snap margin (validation accepts them) turn by up to that
+            # margin over the distance: the sub-cells are grown by it
+            sub_eps = eps + 8.0 * margin / closest if closest > 0.0 else np.inf
             for a in range(3):
                 for side in range(2):
                     sign = 1.0 if side == 0 else -1.0
@@ -965,11 +969,60 @@ def _register(
                                 keys = _grow(keys)
                                 targets = _grow(targets)
                                 sides = _grow8(sides)
+                                bits = _grow(bits)
                             keys[count] = b * n_cells + cell
                             targets[count] = target_ids[t]
                             sides[count] = side
+                            bits[count] = _sub_cells(cell_a, k, lo_u, hi_u, lo_w, hi_w, sub_eps)
                             count += 1
-    return keys, targets, sides, count
+    return keys, targets, sides, bits, count
+
+
+@njit(cache=True)
+def _sub_cells(poly, count, lo_u, hi_u, lo_w, hi_w, eps):
+    """uint64: the sub-cells of the cell [lo_u, hi_u] x [lo_w, hi_w], cut 8 x 8 (bit 8 j + i: column i, row
+    j), that the central projection of the convex polygon poly[:count] (chart coordinates, x0 >= 0) touches,
+    grown by eps. A line through several generators has its direction in every one's projection, so only
+    generators sharing a sub-cell can meet on one line: a finer grid for the price of an AND."""
+    every = np.uint64(0xFFFFFFFFFFFFFFFF)
+    if eps == np.inf:
+        return every
+    du = (hi_u - lo_u) / 8.0
+    dw = (hi_w - lo_w) / 8.0
+    row_lo = np.full(8, np.inf)
+    row_hi = np.full(8, -np.inf)
+    for k in range(count):
+        k2 = k + 1 if k + 1 < count else 0
+        if not (poly[k, 0] > 0.0 and poly[k2, 0] > 0.0):
+            return every
+        u0 = poly[k, 1] / poly[k, 0]
+        w0 = poly[k, 2] / poly[k, 0]
+        u1 = poly[k2, 1] / poly[k2, 0]
+        w1 = poly[k2, 2] / poly[k2, 0]
+        # every row the side crosses gets the side's u range over the row's band (the side is straight)
+        j0 = int(np.floor((min(w0, w1) - eps - lo_w) / dw))
+        j1 = int(np.floor((max(w0, w1) + eps - lo_w) / dw))
+        for j in range(max(j0, 0), min(j1, 7) + 1):
+            band_lo = lo_w + j * dw - eps
+            band_hi = band_lo + dw + 2.0 * eps
+            ua = u0
+            ub = u1
+            if w1 != w0:
+                ta = min(max((band_lo - w0) / (w1 - w0), 0.0), 1.0)
+                tb = min(max((band_hi - w0) / (w1 - w0), 0.0), 1.0)
+                ua = u0 + ta * (u1 - u0)
+                ub = u0 + tb * (u1 - u0)
+            row_lo[j] = min(row_lo[j], min(ua, ub))
+            row_hi[j] = max(row_hi[j], max(ua, ub))
+    result = np.uint64(0)
+    for j in range(8):
+        if row_lo[j] > row_hi[j]:
+            continue
+        i0 = max(int(np.floor((row_lo[j] - eps - lo_u) / du)), 0)
+        i1 = min(int(np.floor((row_hi[j] + eps - lo_u) / du)), 7)
+        for i in range(i0, i1 + 1):
+            result |= np.uint64(1) << np.uint64(8 * j + i)
+    return result
 
 
 @njit(cache=True)
@@ -1205,6 +1258,7 @@ def _vertex_candidates(
     keys = np.empty(4096, dtype=np.int64)
     tgts = np.empty(4096, dtype=np.int64)
     sides = np.empty(4096, dtype=np.int8)
+    bits = np.empty(4096, dtype=np.uint64)
     incident = np.zeros(edges.shape[0], dtype=np.bool_)
     d = np.empty(3)
     back = np.empty(3)
@@ -1279,8 +1333,8 @@ def _vertex_candidates(
             m += 1
         for k in range(ve_off[v], ve_off[v + 1]):
             incident[ve_edge[k]] = False
-        keys, tgts, sides, n_reg = _register(q, 1, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps, keys, tgts,
-                                             sides, 0)  # fmt: skip
+        keys, tgts, sides, bits, n_reg = _register(q, 1, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps, keys,
+                                                   tgts, sides, bits, 0)  # fmt: skip
         order, group_off = _group(keys, n_reg, n_cells)
         for cell in range(n_cells):
             g0 = group_off[cell]
@@ -1515,12 +1569,14 @@ def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
     scale = max(abs(c0), abs(c1), abs(c2), abs(c3)) * max(abs(k0), abs(k1), abs(k2), abs(k3))
     if max(abs(qa), abs(qb), abs(qc)) <= cosine * scale:
         return 0
-    s_roots = np.empty(2)
+    # scalars, not an array: this runs for every pair of curves of a cell, and an allocation costs more than the rest
+    s_first = 0.0
+    s_second = 0.0
     found = 0
     if qa == 0.0:
         if qb == 0.0:
             return 0
-        s_roots[0] = -qc / qb
+        s_first = -qc / qb
         found = 1
     else:
         disc = qb * qb - 4.0 * qa * qc
@@ -1529,15 +1585,14 @@ def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
         root = np.sqrt(disc)
         big = -0.5 * (qb + (root if qb >= 0.0 else -root))
         if big == 0.0:
-            s_roots[0] = 0.0
             found = 1
         else:
-            s_roots[0] = big / qa
-            s_roots[1] = qc / big
+            s_first = big / qa
+            s_second = qc / big
             found = 2
     n_out = 0
     for r in range(found):
-        s = s_roots[r]
+        s = s_first if r == 0 else s_second
         den1 = c2 + c3 * s
         den2 = k2 + k3 * s
         if abs(den1) >= abs(den2):
@@ -1595,6 +1650,7 @@ def _edge_candidates(
     keys = np.empty(4096, dtype=np.int64)
     tgts = np.empty(4096, dtype=np.int64)
     sides = np.empty(4096, dtype=np.int8)
+    bits = np.empty(4096, dtype=np.uint64)
     roots = np.empty((2, 2))
     region = np.empty((16, 2))
     scratch = np.empty((16, 2))
@@ -1642,8 +1698,8 @@ def _edge_candidates(
             ids[m] = f
             slots[m] = m
             m += 1
-        keys, tgts, sides, n_reg = _register(q, nb, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps, keys, tgts,
-                                             sides, 0)  # fmt: skip
+        keys, tgts, sides, bits, n_reg = _register(q, nb, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps,
+                                                   keys, tgts, sides, bits, 0)  # fmt: skip
         order, group_off = _group(keys, n_reg, nb * n_cells)
         len_e = _norm(ed)
         for key in range(nb * n_cells):
@@ -1698,6 +1754,8 @@ def _edge_candidates(
                     fy = ids[sy]
                     if fy == fx or _share_vertex(edges, fx, fy):
                         continue
+                    if bits[rx] & bits[ry] == 0:
+                        continue
                     w = wg[sy]
                     g = dg[sy]
                     c0 = h[0] * w[0] + h[1] * w[1] + h[2] * w[2]
@@ -1719,7 +1777,7 @@ def _edge_candidates(
                     for za in range(ya + 1, n_chosen):
                         rz = chosen[za]
                         fz = ids[tgts[rz]]
-                        if fz == fy or _share_vertex(edges, fy, fz):
+                        if fz == fy or _share_vertex(edges, fy, fz) or bits[rx] & bits[ry] & bits[rz] == 0:
                             continue
                         behind = sides[rx] + sides[ry] + sides[rz]
                         if behind == 0 or behind == 3:
