@@ -408,6 +408,39 @@ def _parallel_edges(vertices, edges, e, f, tol):
 
 
 @njit(cache=True)
+def _side_along(points, offsets, poly, kind, local, motion, tol):
+    """The side of polygon `poly` at a contact (kind, local) that a point moving along `motion` (3,) from it
+    stays on (within tol of the line of that motion): the edge of an edge contact, the side leaving a vertex
+    contact's corner that way; -1 when none does."""
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    d = motion / np.sqrt(_dot(motion, motion))
+    if kind == CONTACT_EDGE:
+        candidates = (local, -1)
+    elif kind == CONTACT_VERTEX:
+        candidates = (local, (local - 1) % count)
+    else:
+        return -1
+    corner = points[first + local]
+    for k in candidates:
+        if k < 0:
+            continue
+        a = points[first + k]
+        b = points[first + (k + 1) % count]
+        span = b - a
+        off = span - _dot(span, d) * d
+        if _dot(off, off) > tol * tol:
+            continue
+        if kind == CONTACT_EDGE:
+            return k
+        # from the corner along the side, not back past the corner
+        leaving = b - corner if k == local else a - corner
+        if _dot(leaving, d) > 0.0:
+            return k
+    return -1
+
+
+@njit(cache=True)
 def _shared_face(ef_off, ef_face, e, f):
     """Whether edges e and f bound one polygon."""
     for i in range(ef_off[e], ef_off[e + 1]):
@@ -638,6 +671,30 @@ def _relaxed_arc(
             if w1 * w1 + w2 * w2 <= 1e-24:
                 return False, 0, 0, 0, 0.0, 0
             slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
+            # another object's edge collinear with this one (boxes side by side or stacked flush), met here or
+            # from its corner here on the side the contact slides to, keeps meeting the lines: its faces close
+            # around them with the edge's own (lines over the seam of two coplanar tops go into the other box)
+            if not blocked and abs(slide) > _SIDE_EPS:
+                count = 0
+                for i in range(ef_off[r_id[j]], ef_off[r_id[j] + 1]):
+                    polys[count] = ef_face[i]
+                    kinds[count] = CONTACT_EDGE
+                    locals_[count] = ef_local[i]
+                    count += 1
+                own = count
+                for i in range(g_lo[g], g_hi[g]):
+                    if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
+                        continue
+                    side_local = _side_along(points, offsets, c_poly[i], c_kind[i], c_local[i], slide * d, tol)
+                    if side_local >= 0:
+                        polys[count] = c_poly[i]
+                        kinds[count] = CONTACT_EDGE
+                        locals_[count] = side_local
+                        count += 1
+                if count > own:
+                    blocked = _group_blocked(
+                        points, offsets, normals, polys, kinds, locals_, count, tilted, angle_tol, arc_start, arc_len
+                    )
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
                 return False, 0, 0, 0, 0.0, 0

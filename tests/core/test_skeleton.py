@@ -217,15 +217,7 @@ def test_no_arc_reaches_an_edge_from_behind_the_face_it_lies_on(name):
     for arc in np.flatnonzero(~arcs.dangling):
         codes = arcs.codes[arc][arcs.codes[arc] >= 0]
         point, direction = swath_line(scene.vertices, scene.edges, codes, 0.5 * (arcs.s[arc, 0] + arcs.s[arc, 1]))
-        # each generator's position along the line (an edge's: where the line meets it)
-        along = {}
-        for code in codes:
-            if code < nv:
-                along[code] = float((scene.vertices[code] - point) @ direction)
-            else:
-                a, b = scene.vertices[scene.edges[code - nv]]
-                normal = np.cross(direction, np.cross(b - a, direction))
-                along[code] = float((a + (normal @ (point - a)) / (normal @ (b - a)) * (b - a) - point) @ direction)
+        along = {code: _along_line(scene, code, point, direction) for code in codes}
         middle = np.mean(list(along.values()))
         for code in codes[codes >= nv]:
             ends = scene.vertices[scene.edges[code - nv]]
@@ -241,6 +233,49 @@ def test_no_arc_reaches_an_edge_from_behind_the_face_it_lies_on(name):
                 towards_others = middle - along[code]
                 assert towards_others * (direction @ normal) > 0.0, f"arc {arc}: edge {code - nv} behind face {face}"
     assert checked > 0
+
+
+@pytest.mark.parametrize("name", ["box on box", "boxes stacked flush", "boxes side by side"])
+def test_arc_lines_end_on_the_front_of_their_end_faces(name):
+    """Lines leaving the outer generators of an arc reach the face they end on from its front: one reached
+    from behind means the lines went into a solid (over the seam of two coplanar box tops, into the box
+    beyond), where they end at the generator instead."""
+    skeleton = _skeleton(name)
+    scene, arcs, groups = skeleton.scene, skeleton.arcs, skeleton.topology.face_group
+    checked = 0
+    for arc in np.flatnonzero(~arcs.dangling):
+        codes = arcs.codes[arc][arcs.codes[arc] >= 0]
+        point, direction = swath_line(scene.vertices, scene.edges, codes, 0.5 * (arcs.s[arc, 0] + arcs.s[arc, 1]))
+        along = [_along_line(scene, code, point, direction) for code in codes]
+        for side, (outer, inner) in enumerate([(along[0], along[-1]), (along[-1], along[0])]):
+            group = arcs.ends[arc, 0, side]
+            if group < 0:
+                continue
+            travel = direction * np.sign(outer - inner)
+            origin = point + outer * direction
+            nearest, front = np.inf, True
+            for face in np.flatnonzero(groups == group):
+                normal = scene.normals[face]
+                rate = normal @ travel
+                if abs(rate) < 1e-9:
+                    continue
+                distance = -(normal @ origin + scene.plane_offsets[face]) / rate
+                if 0.0 <= distance < nearest and _strictly_inside(scene, face, origin + distance * travel, -1e-9):
+                    nearest, front = distance, rate < 0.0
+            if np.isfinite(nearest):
+                checked += 1
+                assert front, f"arc {arc} {codes} ends on face group {group} from behind"
+    assert checked > 0
+
+
+def _along_line(scene: Scene, code: int, point: np.ndarray, direction: np.ndarray) -> float:
+    """Where the line point + t direction meets generator `code` (a vertex, or an edge it crosses): t."""
+    nv = scene.n_vertices
+    if code < nv:
+        return float((scene.vertices[code] - point) @ direction)
+    a, b = scene.vertices[scene.edges[code - nv]]
+    normal = np.cross(direction, np.cross(b - a, direction))
+    return float((a + (normal @ (point - a)) / (normal @ (b - a)) * (b - a) - point) @ direction)
 
 
 def _strictly_inside(scene: Scene, face: int, point: np.ndarray, tol: float) -> bool:
