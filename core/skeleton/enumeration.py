@@ -911,6 +911,8 @@ def _register(
     cell_a = np.empty((_CLIP, 3))
     cell_b = np.empty((_CLIP, 3))
     origin = np.zeros(3)
+    row_lo = np.empty(8)
+    row_hi = np.empty(8)
     n_cells = 3 * n * n
     point_source = nb == 1 and q[0, 0] == q[1, 0] and q[0, 1] == q[1, 1] and q[0, 2] == q[1, 2]
     for b in range(nb):
@@ -973,24 +975,25 @@ def _register(
                             keys[count] = b * n_cells + cell
                             targets[count] = target_ids[t]
                             sides[count] = side
-                            bits[count] = _sub_cells(cell_a, k, lo_u, hi_u, lo_w, hi_w, sub_eps)
+                            bits[count] = _sub_cells(cell_a, k, lo_u, hi_u, lo_w, hi_w, sub_eps, row_lo, row_hi)
                             count += 1
     return keys, targets, sides, bits, count
 
 
 @njit(cache=True)
-def _sub_cells(poly, count, lo_u, hi_u, lo_w, hi_w, eps):
+def _sub_cells(poly, count, lo_u, hi_u, lo_w, hi_w, eps, row_lo, row_hi):
     """uint64: the sub-cells of the cell [lo_u, hi_u] x [lo_w, hi_w], cut 8 x 8 (bit 8 j + i: column i, row
     j), that the central projection of the convex polygon poly[:count] (chart coordinates, x0 >= 0) touches,
     grown by eps. A line through several generators has its direction in every one's projection, so only
-    generators sharing a sub-cell can meet on one line: a finer grid for the price of an AND."""
+    generators sharing a sub-cell can meet on one line: a finer grid for the price of an AND. row_lo, row_hi:
+    (8,) float64 scratch."""
     every = np.uint64(0xFFFFFFFFFFFFFFFF)
     if eps == np.inf:
         return every
     du = (hi_u - lo_u) / 8.0
     dw = (hi_w - lo_w) / 8.0
-    row_lo = np.full(8, np.inf)
-    row_hi = np.full(8, -np.inf)
+    row_lo[:] = np.inf
+    row_hi[:] = -np.inf
     for k in range(count):
         k2 = k + 1 if k + 1 < count else 0
         if not (poly[k, 0] > 0.0 and poly[k2, 0] > 0.0):
@@ -1782,6 +1785,12 @@ def _edge_candidates(
                         behind = sides[rx] + sides[ry] + sides[rz]
                         if behind == 0 or behind == 3:
                             continue
+                        # the line is kept from its inner edge of lowest id (below), and the other inner edge
+                        # is one of the two generators on the side holding two: both below e, it is not kept
+                        two_side = 0 if behind == 1 else 1
+                        if max(fx if sides[rx] == two_side else -1, fy if sides[ry] == two_side else -1,
+                               fz if sides[rz] == two_side else -1) < e:  # fmt: skip
+                            continue
                         found = _quadratic_roots(coef[ya, 0], coef[ya, 1], coef[ya, 2], coef[ya, 3], coef[za, 0],
                                                  coef[za, 1], coef[za, 2], coef[za, 3], angle_tol, roots)  # fmt: skip
                         for r in range(found):
@@ -1823,7 +1832,6 @@ def _edge_candidates(
                             if not ok:
                                 continue
                             # e is inner; the other inner edge is the nearest on the side holding two
-                            two_side = 0 if behind == 1 else 1
                             other = -1
                             nearest = np.inf
                             for k in range(3):
