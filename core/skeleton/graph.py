@@ -12,11 +12,10 @@ dangling arc: with a complete node set there is none, so their count measures co
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 from numba import njit
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .validation import END_PLANAR
@@ -79,19 +78,50 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     del flip
     keys[n:, :3] = keys[tied, :3]
     keys[n:, 3:] = -keys[tied, 3:]
-    pairs = cKDTree(keys).query_pairs(radius, output_type="ndarray")
-    del keys
-    again = pairs >= n
-    pairs[again] = tied[pairs[again] - n]
-    del again
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    if len(pairs) == 0:
-        return np.arange(n, dtype=np.int32)
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    lowest = np.full(labels.max() + 1, n, dtype=np.int32)
-    np.minimum.at(lowest, labels, np.arange(n, dtype=np.int32))
-    return lowest[labels]
+    tree = cKDTree(keys)
+    parent = np.arange(n, dtype=np.int32)
+    # the keys within the radius of each, a block of keys at a time: a line through many generators has many
+    # duplicates, and all pairs of all of them at once set the peak memory of a build
+    for lo in range(0, len(keys), _MERGE_BLOCK):
+        near = tree.query_ball_point(keys[lo : lo + _MERGE_BLOCK], radius, return_sorted=False)
+        counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
+        found = np.fromiter(chain.from_iterable(near), dtype=np.int64, count=int(counts.sum()))
+        del near
+        _merge(parent, np.repeat(np.arange(lo, lo + len(counts)), counts), found, tied)
+    return _lowest_of_sets(parent)
+
+
+#: keys whose neighbours one call of cKDTree.query_ball_point returns (as Python lists)
+_MERGE_BLOCK = 1 << 16
+
+
+@njit(cache=True)
+def _root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def _merge(parent, first, second, tied):
+    """Union of the sets of keys first[k] and second[k] (K,) int64 in the forest parent (N,) int32, whose
+    roots are their sets' lowest ids; keys from N on stand for lines tied (T,) entered twice."""
+    n = len(parent)
+    for k in range(len(first)):
+        a = _root(parent, first[k] if first[k] < n else tied[first[k] - n])
+        b = _root(parent, second[k] if second[k] < n else tied[second[k] - n])
+        if a < b:
+            parent[b] = a
+        elif b < a:
+            parent[a] = b
+
+
+@njit(cache=True)
+def _lowest_of_sets(parent):
+    for i in range(len(parent)):
+        parent[i] = _root(parent, i)
+    return parent
 
 
 def assemble_arcs(kind, codes, end, s, direction, node, edge_tol, n_vertices) -> Arcs:
@@ -113,17 +143,13 @@ def assemble_arcs(kind, codes, end, s, direction, node, edge_tol, n_vertices) ->
     order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind))
     # the kernels read the incidences through `order`: gathered copies of them set the peak memory of a build
     order = _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node)
-    n_arcs = _count_arcs(order, kind, codes, direction)
-    rows, others, pair_node, pair_s = _pair(order, kind, codes, direction, s, node, n_arcs)
+    arcs = Arcs(*_pair(order, kind, codes, end, direction, s, node, _count_arcs(order, kind, codes, direction)))
     del order
-    ends = np.empty((n_arcs, 2, 2), dtype=np.int32)
-    ends[:, 0] = end[rows]
-    ends[:, 1] = end[np.where(others < 0, rows, others)]
     # lines lying in a face's plane at one node lie in it all along the arc (a plane holds the whole swath
     # or meets it in one line, a node): a node whose end line pokes past that face reports where it ends
-    planar = (ends == END_PLANAR).any(axis=1)
-    ends[np.repeat(planar[:, None, :], 2, axis=1)] = END_PLANAR
-    return Arcs(kind[rows], codes[rows].astype(np.int32), pair_node, pair_s, ends)
+    planar = (arcs.ends == END_PLANAR).any(axis=1)
+    arcs.ends[np.repeat(planar[:, None, :], 2, axis=1)] = END_PLANAR
+    return arcs
 
 
 @njit(cache=True)
@@ -195,45 +221,47 @@ def _count_arcs(order, kind, codes, direction):
 
 
 @njit(cache=True)
-def _pair(order, kind, codes, direction, s, node, n_arcs):
-    """Each incidence in `order` that starts an arc paired with the next one ending it, if of the same key:
-    (rows (A,) int64 the start's incidence (a dangling end's own), others (A,) int64 the end's (-1: none),
-    node (A, 2) int32 the start and end node (-1: none), s (A, 2) float64 their coordinates (nan: none))."""
-    rows = np.empty(n_arcs, dtype=np.int64)
-    others = np.full(n_arcs, -1, dtype=np.int64)
+def _pair(order, kind, codes, end, direction, s, node, n_arcs):
+    """The arcs (fields of Arcs, planar ends not spread yet): each incidence in `order` that starts an arc
+    paired with the next one ending it, if of the same key; an incidence left alone is a dangling arc."""
+    out_kind = np.empty(n_arcs, dtype=np.int8)
+    out_codes = np.empty((n_arcs, 3), dtype=np.int32)
     out_node = np.full((n_arcs, 2), -1, dtype=np.int32)
     out_s = np.full((n_arcs, 2), np.nan)
+    out_ends = np.empty((n_arcs, 2, 2), dtype=np.int32)
     count = 0
     pending = -1
-    for i in range(len(order)):
-        r = order[i]
-        if pending >= 0 and not _same_key(kind, codes, order[i - 1], r):
-            rows[count] = pending
+    for i in range(len(order) + 1):
+        r = order[i] if i < len(order) else -1
+        if pending >= 0 and (r < 0 or direction[r] > 0 or not _same_key(kind, codes, pending, r)):
+            # a start not ended: by the end, another start or another key
+            _arc(count, pending, pending, kind, codes, end, out_kind, out_codes, out_ends)
             out_node[count, 0] = node[pending]
             out_s[count, 0] = s[pending]
             count += 1
             pending = -1
+        if r < 0:
+            break
         if direction[r] > 0:
-            if pending >= 0:
-                rows[count] = pending
-                out_node[count, 0] = node[pending]
-                out_s[count, 0] = s[pending]
-                count += 1
             pending = r
             continue
         if pending >= 0:
-            rows[count] = pending
+            _arc(count, pending, r, kind, codes, end, out_kind, out_codes, out_ends)
             out_node[count, 0] = node[pending]
             out_s[count, 0] = s[pending]
-            others[count] = r
             pending = -1
         else:
-            rows[count] = r
+            _arc(count, r, r, kind, codes, end, out_kind, out_codes, out_ends)
         out_node[count, 1] = node[r]
         out_s[count, 1] = s[r]
         count += 1
-    if pending >= 0:
-        rows[count] = pending
-        out_node[count, 0] = node[pending]
-        out_s[count, 0] = s[pending]
-    return rows, others, out_node, out_s
+    return out_kind, out_codes, out_node, out_s, out_ends
+
+
+@njit(cache=True)
+def _arc(row, start, stop, kind, codes, end, out_kind, out_codes, out_ends):
+    """Arc `row` keyed by incidence `start`, its ends as found there and at incidence `stop`."""
+    out_kind[row] = kind[start]
+    out_codes[row] = codes[start]
+    out_ends[row, 0] = end[start]
+    out_ends[row, 1] = end[stop]

@@ -538,7 +538,11 @@ def _concatenated(chunk_type, parts: list):
         return parts.pop()
     columns = {field.name: [getattr(part, field.name) for part in parts] for field in fields(chunk_type)}
     parts.clear()
-    return chunk_type(**{name: np.concatenate(columns.pop(name)) for name in list(columns)})
+    joined = {}
+    for name in list(columns):
+        joined[name] = np.concatenate(columns.pop(name))
+        _return_free_memory()
+    return chunk_type(**joined)
 
 
 def _one_node_per_line(nodes: NodeChunk, node_line: np.ndarray) -> tuple[NodeChunk, np.ndarray]:
