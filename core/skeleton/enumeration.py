@@ -1708,7 +1708,9 @@ def _edge_candidates(
         for key in range(nb * n_cells):
             g0 = group_off[key]
             g1 = group_off[key + 1]
-            if g1 - g0 < 3:
+            # a group lists its targets in increasing id (registration follows the slots); a line is kept from
+            # its lowest inner edge, so a group of ids all below e yields no line kept here
+            if g1 - g0 < 3 or ids[tgts[order[g1 - 1]]] < e:
                 continue
             b = key // n_cells
             cell = key - b * n_cells
@@ -1756,6 +1758,10 @@ def _edge_candidates(
                     sy = tgts[ry]
                     fy = ids[sy]
                     if fy == fx or _share_vertex(edges, fx, fy):
+                        continue
+                    # beside x on its side, y would be with x the two generators of the side holding two, both
+                    # below e (ids increase along the group): no line of such a pair is kept (see below)
+                    if sides[ry] == sides[rx] and fy < e:
                         continue
                     if bits[rx] & bits[ry] == 0:
                         continue
