@@ -149,7 +149,7 @@ def iter_candidates(
         if phase == "map":
             _vertex_maps(
                 vertex_ids[lo:hi], g.vertices, g.points, g.offsets, g.normals, g.plane_offsets, g.edge_out,
-                g.centres, g.radii, *g.objects, g.grid, CELLS, g.margin, g.delta, g.eps, vertex_depth,
+                g.centres, g.radii, *g.objects, g.grid, CELLS, g.margin, g.delta, g.eps, lazy, src, g.tol, vertex_depth,
             )  # fmt: skip
             return None
         if phase == "vertex":
@@ -798,19 +798,22 @@ def _depth_map(
 @njit(cache=True, nogil=True)
 def _vertex_maps(
     ids, vertices, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, out,
+    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, lazy, src, tol, out,
 ):  # fmt: skip
-    """Depth maps (2, 3 n n) of the vertices `ids` into out[v]."""
+    """Depth maps (2, 3 n n) of the vertices `ids` into out[v]; in a lazy build only in the cells whose lines
+    may cross a source (the others keep the caller's inf, which prunes nothing)."""
     q = np.empty((2, 3))
     depth = np.empty((1, 2, 3 * n * n))
-    every = np.ones((1, 3 * n * n), dtype=np.bool_)
+    wanted = np.ones((1, 3 * n * n), dtype=np.bool_)
     for v in ids:
         q[0] = vertices[v]
         q[1] = vertices[v]
+        if lazy:
+            _source_mask(q, 1, src, points, offsets, normals, plane_offsets, edge_out, grid, n, tol, delta, wanted)
         depth[:] = np.inf
         _depth_map(
             q, 1, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, every, depth,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth,
         )  # fmt: skip
         out[v] = depth[0]
 
@@ -1352,7 +1355,7 @@ def _vertex_candidates(
                     ry = order[y]
                     sg = tgts[ry]
                     g = ids[sg]
-                    if f == g or _share_vertex(edges, f, g):
+                    if f == g or _share_vertex(edges, f, g) or bits[rx] & bits[ry] == 0:
                         continue
                     pg = plane[sg]
                     d0 = pf[1] * pg[2] - pf[2] * pg[1]
