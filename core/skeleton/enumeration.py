@@ -22,9 +22,18 @@ What prunes, and why each prune is safe (validation rejects every line pruned he
   between two others on the line must be grazed, not pierced: when the faces around it close around the
   line (the test validation applies to inner generators), the line is dropped. Only decisions clear by an
   angular margin prune; near-sliding faces keep the line.
+* Sub-cells. Each registration also records which of an 8 x 8 split of its cell the directions from the
+  source to the target reach (grown by the snap margin over the target's distance, the turn of a line that
+  validation still lets meet it). The generators of one line share the sub-cell of its direction, so curves
+  and pairs that share none are not solved.
+* One line, one source edge. An E4 line is kept from its inner edge of lowest id, and the other inner edge
+  is one of the two generators on the side holding two: pairs whose two generators there both have lower
+  ids than the source edge are not solved (their line is kept from a lower edge).
 * Lazy construction (section 5): with `sources`, cells whose lines cannot cross a source polygon are skipped
   and every proposed line crosses one (within tol, a line in a source's plane counting as crossing, as for
-  the skeleton's record of built sources).
+  the skeleton's record of built sources). An E4 pivot whose lines E(s) X(t) all pass beside every source
+  (a Pluecker side of the same strict sign for some edge of each source, over the whole (s, t) region) is
+  dropped before its curves are tested.
 
 Outer generators get no local test: validation lets a line stop on its outer generators (a line leaving a
 floor corner), so a VV pair is never culled by the faces at its vertices, only by occlusion.
