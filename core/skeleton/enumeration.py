@@ -31,9 +31,10 @@ What prunes, and why each prune is safe (validation rejects every line pruned he
   ids than the source edge are not solved (their line is kept from a lower edge).
 * Lazy construction (section 5): with `sources`, cells whose lines cannot cross a source polygon are skipped
   and every proposed line crosses one (within tol, a line in a source's plane counting as crossing, as for
-  the skeleton's record of built sources). An E4 pivot whose lines E(s) X(t) all pass beside every source
-  (a Pluecker side of the same strict sign for some edge of each source, over the whole (s, t) region) is
-  dropped before its curves are tested.
+  the skeleton's record of built sources). An E4 pivot is dropped before its curves are tested when none
+  of its lines E(s) X(t) can pass on one side of all the edges of a source: for each source, over the whole
+  (s, t) region, the Pluecker side against one edge is strictly negative and against another strictly
+  positive.
 
 Outer generators get no local test: validation lets a line stop on its outer generators (a line leaving a
 floor corner), so a VV pair is never culled by the faces at its vertices, only by occlusion.
