@@ -12,7 +12,6 @@ dangling arc: with a complete node set there is none, so their count measures co
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import chain
 
 import numpy as np
 from numba import njit
@@ -80,19 +79,23 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     keys[n:, 3:] = -keys[tied, 3:]
     tree = cKDTree(keys)
     parent = np.arange(n, dtype=np.int32)
-    # the keys within the radius of each, a block of keys at a time: a line through many generators has many
-    # duplicates, and all pairs of all of them at once set the peak memory of a build
+    # the neighbours within the radius of a block of keys at a time, the nearest k first, more for the keys
+    # with k of them: a line through many generators has many duplicates, and all pairs of all of them at once
+    # (cKDTree.query_pairs, query_ball_point's lists) set the peak memory of a build
+    bound = np.nextafter(radius, np.inf)
     for lo in range(0, len(keys), _MERGE_BLOCK):
-        near = tree.query_ball_point(keys[lo : lo + _MERGE_BLOCK], radius, return_sorted=False)
-        counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
-        found = np.fromiter(chain.from_iterable(near), dtype=np.int64, count=int(counts.sum()))
-        del near
-        _merge(parent, np.repeat(np.arange(lo, lo + len(counts)), counts), found, tied)
+        ids = np.arange(lo, min(lo + _MERGE_BLOCK, len(keys)))
+        k = 8
+        while len(ids):
+            distance, found = tree.query(keys[ids], k=k, distance_upper_bound=bound)
+            _merge(parent, ids, found, tied)
+            ids = ids[np.isfinite(distance[:, -1])]
+            k *= 4
     return _lowest_of_sets(parent)
 
 
-#: keys whose neighbours one call of cKDTree.query_ball_point returns (as Python lists)
-_MERGE_BLOCK = 1 << 16
+#: keys whose neighbours one cKDTree.query looks for
+_MERGE_BLOCK = 1 << 15
 
 
 @njit(cache=True)
@@ -104,17 +107,22 @@ def _root(parent, i):
 
 
 @njit(cache=True)
-def _merge(parent, first, second, tied):
-    """Union of the sets of keys first[k] and second[k] (K,) int64 in the forest parent (N,) int32, whose
-    roots are their sets' lowest ids; keys from N on stand for lines tied (T,) entered twice."""
+def _merge(parent, ids, found, tied):
+    """Union of the sets of keys ids[b] and found[b, j] (B, K) int64 (N + T: none) in the forest parent (N,)
+    int32, whose roots are their sets' lowest ids; keys from N on stand for the lines tied (T,) entered twice."""
     n = len(parent)
-    for k in range(len(first)):
-        a = _root(parent, first[k] if first[k] < n else tied[first[k] - n])
-        b = _root(parent, second[k] if second[k] < n else tied[second[k] - n])
-        if a < b:
-            parent[b] = a
-        elif b < a:
-            parent[a] = b
+    for row in range(found.shape[0]):
+        a = _root(parent, ids[row] if ids[row] < n else tied[ids[row] - n])
+        for j in range(found.shape[1]):
+            key = found[row, j]
+            if key >= n + len(tied):
+                break
+            b = _root(parent, key if key < n else tied[key - n])
+            if a < b:
+                parent[b] = a
+            elif b < a:
+                parent[a] = b
+                a = b
 
 
 @njit(cache=True)
@@ -140,8 +148,8 @@ def assemble_arcs(kind, codes, end, s, direction, node, edge_tol, n_vertices) ->
             np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32), np.empty((0, 2)),
             np.empty((0, 2, 2), np.int32),
         )  # fmt: skip
-    order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind))
     # the kernels read the incidences through `order`: gathered copies of them set the peak memory of a build
+    order = np.lexsort((s, codes[:, 2], codes[:, 1], codes[:, 0], kind)).astype(np.int32)
     order = _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node)
     arcs = Arcs(*_pair(order, kind, codes, end, direction, s, node, _count_arcs(order, kind, codes, direction)))
     del order
@@ -161,12 +169,12 @@ def _same_key(kind, codes, i, j):
 
 @njit(cache=True)
 def _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node):
-    """The incidences sorted by key then s (`order` (M,) int64), reordered so that within each run of
+    """The incidences sorted by key then s (`order` (M,) int32), reordered so that within each run of
     coordinates closer than the tolerance to the run's first the ends (direction -1) come before the starts;
     an incidence repeating one of its run (same node, same direction: merged nodes) is left out. The result
     is a prefix of `order`, overwritten."""
     m = len(order)
-    run = np.empty(16, dtype=np.int64)
+    run = np.empty(16, dtype=order.dtype)
     k = 0
     i = 0
     while i < m:
@@ -181,7 +189,7 @@ def _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node):
         while j < m and _same_key(kind, codes, first, order[j]) and s[order[j]] - s[first] <= gap:
             j += 1
         if j - i > len(run):
-            run = np.empty(2 * (j - i), dtype=np.int64)
+            run = np.empty(2 * (j - i), dtype=order.dtype)
         run[: j - i] = order[i:j]
         begin = k
         for kept in (-1, 1):

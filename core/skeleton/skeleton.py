@@ -170,7 +170,9 @@ class Skeleton:
         complete = self.sources is None
         if complete:
             # no later build merges nodes or pairs incidences: the duplicates go before the incidences are joined
-            nodes, node_id = _one_node_per_line(nodes, node_line)
+            columns = dict(vars(nodes))
+            del nodes
+            nodes, node_id = _one_node_per_line(columns, node_line)
             del node_line
         else:
             node_id = node_line
@@ -545,12 +547,17 @@ def _concatenated(chunk_type, parts: list):
     return chunk_type(**joined)
 
 
-def _one_node_per_line(nodes: NodeChunk, node_line: np.ndarray) -> tuple[NodeChunk, np.ndarray]:
-    """The nodes standing for their line (node_line (N,): see Skeleton), and (N,) int32 the id among them of
-    each node's line."""
+def _one_node_per_line(columns: dict, node_line: np.ndarray) -> tuple[NodeChunk, np.ndarray]:
+    """The nodes standing for their line (node_line (N,): see Skeleton) among all nodes (columns: the fields
+    of their NodeChunk, emptied column by column: two copies of all at once would set the peak memory of a
+    build), and (N,) int32 the id among them of each node's line."""
     kept = node_line == np.arange(len(node_line))
     line_id = np.cumsum(kept, dtype=np.int32) - 1
-    return NodeChunk(**{name: values[kept] for name, values in vars(nodes).items()}), line_id[node_line]
+    selected = {}
+    for name in list(columns):
+        selected[name] = columns.pop(name)[kept]
+        _return_free_memory()
+    return NodeChunk(**selected), line_id[node_line]
 
 
 def _element_faces(scene: Scene, topology, code: int) -> np.ndarray:
