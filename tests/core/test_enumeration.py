@@ -29,7 +29,7 @@ from core.skeleton.enumeration import iter_candidates
 from core.skeleton.topology import scene_topology
 from core.skeleton.validation import validate_candidates
 from tests.core.naive_enumeration import generator_masks, naive_candidates, room_scene
-from tests.core.skeleton_scenes import box_over_floor_scene, generic_closed_room, lamp_table_scene
+from tests.core.skeleton_scenes import box_over_floor_scene, boxes_in_room, generic_closed_room, lamp_table_scene
 
 SCENES = {
     "open floor": lambda: box_over_floor_scene().scene,
@@ -174,6 +174,47 @@ def test_candidates_are_well_formed():
             assert abs(normal @ c.direction[i]) <= scene.tol.cosine
             assert abs(normal @ c.origin[i] + scene.plane_offsets[shared[0]]) <= 4 * tol
     assert max(line_keys(c).values()) == 1, "a candidate proposed twice"
+
+
+def test_lines_from_a_vertex_through_a_crossing_of_edges_are_proposed():
+    # the upper box overhangs the lower one: its bottom edges cross the lower box's top edges
+    scene = boxes_in_room([((1.0, 1.0, 0.0), (2.0, 2.0, 0.6)), ((1.5, 0.8, 0.6), (2.3, 1.6, 1.0))])
+    vertex_mask, edge_mask = generator_masks(scene)
+    tol = scene.tol.length
+    expected = set()
+    edge_ids = np.flatnonzero(edge_mask)
+    for i, e in enumerate(edge_ids):
+        for f in edge_ids[i + 1 :]:
+            if set(scene.edges[e]) & set(scene.edges[f]):
+                continue
+            a, b = scene.vertices[scene.edges[e]]
+            p, q = scene.vertices[scene.edges[f]]
+            normal = np.cross(b - a, q - p)
+            if np.linalg.norm(normal) < 1e-9 or abs((p - a) @ normal) > tol * np.linalg.norm(normal):
+                continue
+            (s, t), *_ = np.linalg.lstsq(np.stack([b - a, p - q], axis=1), p - a, rcond=None)
+            if not (1e-6 < s < 1 - 1e-6 and 1e-6 < t < 1 - 1e-6):
+                continue
+            crossing = a + s * (b - a)
+            for v in np.flatnonzero(vertex_mask):
+                in_plane = abs((scene.vertices[v] - crossing) @ normal) <= tol * np.linalg.norm(normal)
+                if in_plane and v not in scene.edges[[e, f]] and np.linalg.norm(scene.vertices[v] - crossing) > tol:
+                    expected.add((int(v), int(e), int(f)))
+    assert len(expected) >= 8
+    candidates = fast(scene)
+    vee = {
+        (int(v[0]), int(e[0]), int(e[1]))
+        for k, v, e in zip(candidates.kind, candidates.vertices, candidates.edges, strict=True)
+        if k == CANDIDATE_VEE
+    }
+    assert expected <= vee
+    assert max(line_keys(candidates).values()) == 1, "a candidate proposed twice"
+    nodes = accepted(scene, candidates)
+    through_crossings = [
+        key for key in nodes
+        if any(key[1] == tuple(sorted([(1, v), (2, e), (2, f)])) for v, e, f in expected)
+    ]  # fmt: skip
+    assert through_crossings
 
 
 # ---------------------------------------------------------------------------------------------------------
