@@ -79,23 +79,26 @@ def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol
     keys[n:, 3:] = -keys[tied, 3:]
     tree = cKDTree(keys)
     parent = np.arange(n, dtype=np.int32)
-    # the neighbours within the radius of a block of keys at a time, the nearest k first, more for the keys
-    # with k of them: a line through many generators has many duplicates, and all pairs of all of them at once
-    # (cKDTree.query_pairs, query_ball_point's lists) set the peak memory of a build
+    # the neighbours within the radius of a block of keys at a time, the nearest k first, then more for the
+    # keys with k of them, in smaller blocks: a line through many generators has many duplicates, and all pairs
+    # of all of them at once (cKDTree.query_pairs, query_ball_point's lists) set the peak memory of a build
     bound = np.nextafter(radius, np.inf)
-    for lo in range(0, len(keys), _MERGE_BLOCK):
-        ids = np.arange(lo, min(lo + _MERGE_BLOCK, len(keys)))
-        k = 8
-        while len(ids):
-            distance, found = tree.query(keys[ids], k=k, distance_upper_bound=bound)
-            _merge(parent, ids, found, tied)
-            ids = ids[np.isfinite(distance[:, -1])]
-            k *= 4
+    ids = np.arange(len(keys))
+    k = 8
+    while len(ids):
+        more = []
+        for lo in range(0, len(ids), max(1, _MERGE_NEIGHBOURS // k)):
+            block = ids[lo : lo + max(1, _MERGE_NEIGHBOURS // k)]
+            distance, found = tree.query(keys[block], k=k, distance_upper_bound=bound)
+            _merge(parent, block, found, tied)
+            more.append(block[np.isfinite(distance[:, -1])])
+        ids = np.concatenate(more)
+        k *= 4
     return _lowest_of_sets(parent)
 
 
-#: keys whose neighbours one cKDTree.query looks for
-_MERGE_BLOCK = 1 << 15
+#: neighbours (keys times k) one cKDTree.query looks for
+_MERGE_NEIGHBOURS = 1 << 18
 
 
 @njit(cache=True)
