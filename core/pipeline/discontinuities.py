@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from ..formfactor import disk_ff_estimate
+from ..unionfind import find_root
 from .perception import LUMINANCE_WEIGHTS
 
 
@@ -108,14 +109,6 @@ def merge_collinear(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.nd
 
 
 @njit(cache=True)
-def _root(parent, i):
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True)
 def _collinear_roots(segments, units, lengths, tol):
     """(M,) int64 the union-find root of each segment, segments j > i joined to i when both ends of j lie within
     tol of i's line and j's extent along it meets [-tol, length_i + tol] (every pair of a receiver's traces is
@@ -141,10 +134,10 @@ def _collinear_roots(segments, units, lengths, tol):
                 low = min(low, along)
                 high = max(high, along)
             if on_line and high >= -tol and low <= lengths[i] + tol:
-                parent[_root(parent, j)] = _root(parent, i)
+                parent[find_root(parent, j)] = find_root(parent, i)
     roots = np.empty(count, dtype=np.int64)
     for i in range(count):
-        roots[i] = _root(parent, i)
+        roots[i] = find_root(parent, i)
     return roots
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
+from ..unionfind import find_root
 from .validation import END_PLANAR
 
 
@@ -102,25 +103,17 @@ _MERGE_NEIGHBOURS = 1 << 18
 
 
 @njit(cache=True)
-def _root(parent, i):
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True)
 def _merge(parent, ids, found, tied):
     """Union of the sets of keys ids[b] and found[b, j] (B, K) int64 (N + T: none) in the forest parent (N,)
     int32, whose roots are their sets' lowest ids; keys from N on stand for the lines tied (T,) entered twice."""
     n = len(parent)
     for row in range(found.shape[0]):
-        a = _root(parent, ids[row] if ids[row] < n else tied[ids[row] - n])
+        a = find_root(parent, ids[row] if ids[row] < n else tied[ids[row] - n])
         for j in range(found.shape[1]):
             key = found[row, j]
             if key >= n + len(tied):
                 break
-            b = _root(parent, key if key < n else tied[key - n])
+            b = find_root(parent, key if key < n else tied[key - n])
             if a < b:
                 parent[b] = a
             elif b < a:
@@ -131,7 +124,7 @@ def _merge(parent, ids, found, tied):
 @njit(cache=True)
 def _lowest_of_sets(parent):
     for i in range(len(parent)):
-        parent[i] = _root(parent, i)
+        parent[i] = find_root(parent, i)
     return parent
 
 
