@@ -392,21 +392,21 @@ def _contact_arc(points, offsets, normals, polygon, kind, local, e1, e2):
     """The directions around the segment (start angle, length) in which the face extends from the contact.
 
     Projected along the segment onto the plane (e1, e2), a face touched along edge k is a half-plane and a
-    face touched at corner k is the convex sector between its two edges.
+    face touched at corner k is the convex sector between its two edges. Points are read by component: a
+    row view of the arrays would cost two atomic reference counts, a difference a heap allocation.
     """
     first = offsets[polygon]
     count = offsets[polygon + 1] - first
-    corner = points[first + local]
+    corner = first + local
     if kind == CONTACT_EDGE:
-        following = points[first + (local + 1) % count]
-        normal = normals[polygon]
-        ex = following[0] - corner[0]
-        ey = following[1] - corner[1]
-        ez = following[2] - corner[2]
+        following = first + (local + 1) % count
+        ex = points[following, 0] - points[corner, 0]
+        ey = points[following, 1] - points[corner, 1]
+        ez = points[following, 2] - points[corner, 2]
         # inward direction of the face, across the edge
-        wx = normal[1] * ez - normal[2] * ey
-        wy = normal[2] * ex - normal[0] * ez
-        wz = normal[0] * ey - normal[1] * ex
+        wx = normals[polygon, 1] * ez - normals[polygon, 2] * ey
+        wy = normals[polygon, 2] * ex - normals[polygon, 0] * ez
+        wz = normals[polygon, 0] * ey - normals[polygon, 1] * ex
         cu = ex * e1[0] + ey * e1[1] + ez * e1[2]
         cv = ex * e2[0] + ey * e2[1] + ez * e2[2]
         wu = wx * e1[0] + wy * e1[1] + wz * e1[2]
@@ -415,10 +415,14 @@ def _contact_arc(points, offsets, normals, polygon, kind, local, e1, e2):
             cu = -cu
             cv = -cv
         return _wrap_angle(np.arctan2(cv, cu)), np.pi
-    previous = points[first + (local - 1) % count]
-    following = points[first + (local + 1) % count]
-    alpha = _wrap_angle(np.arctan2(_dot(previous - corner, e2), _dot(previous - corner, e1)))
-    beta = _wrap_angle(np.arctan2(_dot(following - corner, e2), _dot(following - corner, e1)))
+    previous = first + (local - 1) % count
+    following = first + (local + 1) % count
+    alpha = _wrap_angle(
+        np.arctan2(_corner_dot(points, previous, corner, e2), _corner_dot(points, previous, corner, e1))
+    )
+    beta = _wrap_angle(
+        np.arctan2(_corner_dot(points, following, corner, e2), _corner_dot(points, following, corner, e1))
+    )
     sweep = _wrap_angle(beta - alpha)
     if sweep <= np.pi:
         return alpha, sweep
@@ -426,18 +430,40 @@ def _contact_arc(points, offsets, normals, polygon, kind, local, e1, e2):
 
 
 @njit(cache=True)
+def _corner_dot(points, tip, corner, axis):
+    """Dot product of points[tip] - points[corner] with the 3-vector axis."""
+    return (
+        (points[tip, 0] - points[corner, 0]) * axis[0]
+        + (points[tip, 1] - points[corner, 1]) * axis[1]
+        + (points[tip, 2] - points[corner, 2]) * axis[2]
+    )
+
+
+@njit(cache=True)
 def _arcs_cover_circle(arc_start, arc_length, count, angle_tol):
     """Whether the union of `count` arcs covers the whole circle (gaps up to angle_tol are closed)."""
+    return _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, np.empty(2 * count))
+
+
+@njit(cache=True)
+def _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, bounds):
+    """_arcs_cover_circle with a scratch array bounds (at least 2 count,) float64 for the arcs' ends."""
     total = 0.0
     for i in range(count):
         total += arc_length[i]
     if total < _TWO_PI - angle_tol:
         return False
-    bounds = np.empty(2 * count)
     for i in range(count):
         bounds[2 * i] = arc_start[i]
         bounds[2 * i + 1] = _wrap_angle(arc_start[i] + arc_length[i])
-    bounds.sort()
+    # insertion sort (a few ends, no work array), NaN last as in np.sort
+    for i in range(1, 2 * count):
+        value = bounds[i]
+        j = i
+        while j > 0 and (value < bounds[j - 1] or (np.isnan(bounds[j - 1]) and not np.isnan(value))):
+            bounds[j] = bounds[j - 1]
+            j -= 1
+        bounds[j] = value
     for i in range(2 * count):
         lo = bounds[i]
         hi = bounds[i + 1] if i + 1 < 2 * count else bounds[0] + _TWO_PI
@@ -456,7 +482,7 @@ def _arcs_cover_circle(arc_start, arc_length, count, angle_tol):
 
 @njit(cache=True)
 def _perpendicular_frame(direction):
-    """Two unit vectors (3,) spanning the plane perpendicular to a nonzero direction (3,)."""
+    """Two unit 3-vectors (tuples) spanning the plane perpendicular to a nonzero direction (3,)."""
     length = np.sqrt(_dot(direction, direction))
     dx = direction[0] / length
     dy = direction[1] / length
@@ -464,22 +490,22 @@ def _perpendicular_frame(direction):
     ax = abs(dx)
     ay = abs(dy)
     az = abs(dz)
-    helper = np.zeros(3)
+    # the axis least aligned with the direction
+    hx = 0.0
+    hy = 0.0
+    hz = 0.0
     if ax <= ay and ax <= az:
-        helper[0] = 1.0
+        hx = 1.0
     elif ay <= az:
-        helper[1] = 1.0
+        hy = 1.0
     else:
-        helper[2] = 1.0
-    e1 = np.empty(3)
-    e1[0] = helper[1] * dz - helper[2] * dy
-    e1[1] = helper[2] * dx - helper[0] * dz
-    e1[2] = helper[0] * dy - helper[1] * dx
-    e1 /= np.sqrt(_dot(e1, e1))
-    e2 = np.empty(3)
-    e2[0] = dy * e1[2] - dz * e1[1]
-    e2[1] = dz * e1[0] - dx * e1[2]
-    e2[2] = dx * e1[1] - dy * e1[0]
+        hz = 1.0
+    cx = hy * dz - hz * dy
+    cy = hz * dx - hx * dz
+    cz = hx * dy - hy * dx
+    norm = np.sqrt(cx * cx + cy * cy + cz * cz)
+    e1 = (cx / norm, cy / norm, cz / norm)
+    e2 = (dy * e1[2] - dz * e1[1], dz * e1[0] - dx * e1[2], dx * e1[1] - dy * e1[0])
     return e1, e2
 
 

@@ -25,6 +25,7 @@ the scene, END_PLANAR both ends of lines lying in a face's plane.
 from __future__ import annotations
 
 import os
+from collections import namedtuple
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -37,7 +38,7 @@ from ..raycast import (
     CONTACT_INTERIOR,
     CONTACT_SLIDING,
     CONTACT_VERTEX,
-    _arcs_cover_circle,
+    _arcs_cover_circle_with,
     _contact_arc,
     _gather_contacts,
     _perpendicular_frame,
@@ -97,6 +98,40 @@ _SIDE_EPS = 1e-9
 """Relative margin of the first-order side tests; ambiguous cases count as hits (never a false free line)."""
 
 
+_Geometry = namedtuple(
+    "_Geometry",
+    "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local face_group "
+    "object_ids diag tol angle_tol",
+)
+"""The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
+int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
+vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
+int64); face_group and object_ids (F,) int64; the scene's diagonal, tol.length and tol.cosine (floats)."""
+
+_Line = namedtuple(
+    "_Line", "c_poly c_kind c_local g_lo g_hi g_tau n_groups sl_poly sl_a sl_b n_sliding start u f1 f2"
+)
+"""One cast candidate line start + tau u, tau in [0, length] (start, u and the unit frame f1, f2 perpendicular
+to u: 3-tuples): its point contacts sorted along it (c_poly int64, c_kind int8, c_local int64), in n_groups
+groups of one point (contacts g_lo[g]..g_hi[g] - 1 at tau g_tau[g]), and the n_sliding faces sl_poly it slides
+over, from sl_a to sl_b."""
+
+_Scratch = namedtuple(
+    "_Scratch",
+    "polys kinds locals_ arc_start arc_len bounds in_plane system rhs solution order codes touch touch_face planar "
+    "behind",
+)
+"""Work arrays of one thread, reused for every line and arc (see _new_scratch)."""
+
+_Incidences = namedtuple("_Incidences", "node kind codes end s direction")
+"""The incidence rows being filled (the columns of IncidenceChunk, codes and end int64)."""
+
+
+# ----------------------------------------------------------------------------------------------------------
+# 3-vectors: rows are read by component and small results are tuples, because a row view costs two atomic
+# reference counts and a small array a heap allocation, which together took most of the kernels' time
+
+
 @njit(cache=True)
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -104,11 +139,59 @@ def _dot(a, b):
 
 @njit(cache=True)
 def _cross(a, b):
-    out = np.empty(3)
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-    return out
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True)
+def _row(array, i):
+    """Row i of an (n, 3) array as a 3-tuple."""
+    return array[i, 0], array[i, 1], array[i, 2]
+
+
+@njit(cache=True)
+def _minus(a, b):
+    return a[0] - b[0], a[1] - b[1], a[2] - b[2]
+
+
+@njit(cache=True)
+def _negated(a):
+    return -a[0], -a[1], -a[2]
+
+
+@njit(cache=True)
+def _scaled(a, s):
+    return s * a[0], s * a[1], s * a[2]
+
+
+@njit(cache=True)
+def _over(a, s):
+    return a[0] / s, a[1] / s, a[2] / s
+
+
+@njit(cache=True)
+def _along(point, t, d):
+    """point + t d."""
+    return point[0] + t * d[0], point[1] + t * d[1], point[2] + t * d[2]
+
+
+@njit(cache=True)
+def _combined(x, a, y, b):
+    """x a + y b."""
+    return x * a[0] + y * b[0], x * a[1] + y * b[1], x * a[2] + y * b[2]
+
+
+@njit(cache=True)
+def _new_scratch(size):
+    """_Scratch for lines of up to `size` contacts and faces around a generator: polys, kinds (int8), locals_,
+    arc_start, arc_len (size,); bounds (2 size,); in_plane (size,) bool; system (4, 4), rhs, solution (4,);
+    order, codes (3,) int64; touch, planar (2,) bool; touch_face, behind (2,) int64."""
+    return _Scratch(
+        np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int8), np.empty(size, dtype=np.int64),
+        np.empty(size), np.empty(size), np.empty(2 * size), np.empty(size, dtype=np.bool_),
+        np.empty((4, 4)), np.empty(4), np.empty(4), np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64),
+        np.empty(2, dtype=np.bool_), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.bool_),
+        np.empty(2, dtype=np.int64),
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -131,63 +214,74 @@ def _clip_line(origin, direction, lo, hi):
 
 
 @njit(cache=True)
-def _group_blocked(points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len):
-    """Whether contacts at one point close around a line of the given (unit) direction (it cannot pass there).
+def _group_blocked(geometry, polys, kinds, locals_, lo, hi, direction, scratch):
+    """Whether contacts lo..hi-1 of (polys, kinds, locals_), at one point, close around a line of the given
+    (unit) direction (it cannot pass there).
 
     A face whose plane holds the line projects along it to a ray, not a sector: it covers no direction around
     the line, so it is left out (its sector's side would otherwise be decided by rounding, and a line sliding
     along a face of a convex corner would count as entering the solid)."""
+    normals = geometry.normals
+    angle_tol = geometry.angle_tol
+    # sectors cost a frame and arc tangents, and most points have fewer than two faces with one: count first
     members = 0
-    e1, e2 = _perpendicular_frame(direction)
-    for i in range(count):
+    for i in range(lo, hi):
         if kinds[i] == CONTACT_INTERIOR:
             return True
         if kinds[i] != CONTACT_EDGE and kinds[i] != CONTACT_VERTEX:
             continue
-        if abs(_dot(normals[polys[i]], direction)) > angle_tol:
-            arc_start[members], arc_len[members] = _contact_arc(
-                points, offsets, normals, polys[i], kinds[i], locals_[i], e1, e2
-            )
+        if abs(_dot(_row(normals, polys[i]), direction)) > angle_tol:
             members += 1
     if members < 2:
         return False
-    return _arcs_cover_circle(arc_start, arc_len, members, angle_tol)
+    e1, e2 = _perpendicular_frame(direction)
+    arc_start = scratch.arc_start
+    arc_len = scratch.arc_len
+    members = 0
+    for i in range(lo, hi):
+        if kinds[i] != CONTACT_EDGE and kinds[i] != CONTACT_VERTEX:
+            continue
+        if abs(_dot(_row(normals, polys[i]), direction)) > angle_tol:
+            arc_start[members], arc_len[members] = _contact_arc(
+                geometry.points, geometry.offsets, normals, polys[i], kinds[i], locals_[i], e1, e2
+            )
+            members += 1
+    return _arcs_cover_circle_with(arc_start, arc_len, members, angle_tol, scratch.bounds)
 
 
 @njit(cache=True)
-def _displaced_hit(points, offsets, normals, poly, kind, local, delta, u, angle_tol, margin=_SIDE_EPS):
-    """First-order test: does the line displaced by `delta` (3,) (perpendicular to u) cross the polygon at the
-    contact? Returns (hit, shift) where shift is how far along u the crossing moves (to order contacts).
+def _displaced_hit(geometry, poly, kind, local, delta, u, margin=_SIDE_EPS):
+    """First-order test: does the line displaced by the 3-vector `delta` (perpendicular to u) cross the polygon
+    at the contact? Returns (hit, shift) where shift is how far along u the crossing moves (to order contacts).
 
     margin > 0 counts a displaced line that keeps grazing the contact (crossing on the polygon's boundary) as a
     hit, what deciding whether an arc is free needs; margin < 0 counts only lines crossing the polygon's
     inside, what finding where the lines end needs (a grazed face does not end them)."""
-    n = normals[poly]
+    points = geometry.points
+    n = _row(geometry.normals, poly)
     nu = _dot(n, u)
     grazing = margin > 0.0
-    if abs(nu) <= angle_tol:
+    if abs(nu) <= geometry.angle_tol:
         return grazing, 0.0
     nd = _dot(n, delta)
     shift = -nd / nu
     if kind == CONTACT_INTERIOR:
         return True, shift
-    q = delta + shift * u
+    q = _along(delta, shift, u)
     q_len = np.sqrt(_dot(q, q))
     if q_len == 0.0:
         return grazing, shift
-    first = offsets[poly]
-    count = offsets[poly + 1] - first
+    first = geometry.offsets[poly]
+    count = geometry.offsets[poly + 1] - first
     if kind == CONTACT_EDGE:
-        a = points[first + local]
-        b = points[first + (local + 1) % count]
-        m = _cross(n, b - a)
+        m = _cross(n, _minus(_row(points, first + (local + 1) % count), _row(points, first + local)))
         return _dot(q, m) > -margin * q_len * np.sqrt(_dot(m, m)), shift
     if kind == CONTACT_VERTEX:
-        prev = points[first + (local - 1) % count]
-        corner = points[first + local]
-        nxt = points[first + (local + 1) % count]
-        m1 = _cross(n, corner - prev)
-        m2 = _cross(n, nxt - corner)
+        prev = _row(points, first + (local - 1) % count)
+        corner = _row(points, first + local)
+        nxt = _row(points, first + (local + 1) % count)
+        m1 = _cross(n, _minus(corner, prev))
+        m2 = _cross(n, _minus(nxt, corner))
         inside1 = _dot(q, m1) > -margin * q_len * np.sqrt(_dot(m1, m1))
         inside2 = _dot(q, m2) > -margin * q_len * np.sqrt(_dot(m2, m2))
         return inside1 and inside2, shift
@@ -195,20 +289,22 @@ def _displaced_hit(points, offsets, normals, poly, kind, local, delta, u, angle_
 
 
 @njit(cache=True)
-def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
+def _sliding_interval(geometry, poly, start, u, length):
     """(tau_in, tau_out): where the line start + tau u (tau in [0, length]), lying in the polygon's plane,
     overlaps the polygon; tau_in > tau_out when it does not."""
-    first = offsets[poly]
-    count = offsets[poly + 1] - first
-    normal = normals[poly]
+    points = geometry.points
+    tol = geometry.tol
+    first = geometry.offsets[poly]
+    count = geometry.offsets[poly + 1] - first
+    normal = _row(geometry.normals, poly)
     lo = 0.0
     hi = length
     for k in range(count):
-        a = points[first + k]
-        b = points[first + (k + 1) % count]
-        outward = _cross(b - a, normal)
-        outward /= np.sqrt(_dot(outward, outward))
-        offset = _dot(start - a, outward)
+        a = _row(points, first + k)
+        b = _row(points, first + (k + 1) % count)
+        outward = _cross(_minus(b, a), normal)
+        outward = _over(outward, np.sqrt(_dot(outward, outward)))
+        offset = _dot(_minus(start, a), outward)
         rate = _dot(u, outward)
         if rate == 0.0:
             if offset > tol:
@@ -221,20 +317,22 @@ def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
 
 
 @njit(cache=True)
-def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
-    """Whether `point` (in the polygon's plane) moved by a small multiple of `delta` (3,) (in that plane) lies
+def _inside_to_first_order(geometry, poly, point, delta):
+    """Whether `point` (in the polygon's plane) moved by a small multiple of `delta` (in that plane) lies
     strictly inside the polygon: inside by more than tol from every side, or on one side and moving inwards.
     Within tol of two sides (a corner) a first-order motion tells nothing: not inside."""
-    first = offsets[poly]
-    count = offsets[poly + 1] - first
-    normal = normals[poly]
+    points = geometry.points
+    tol = geometry.tol
+    first = geometry.offsets[poly]
+    count = geometry.offsets[poly + 1] - first
+    normal = _row(geometry.normals, poly)
     delta_len = np.sqrt(_dot(delta, delta))
     on_sides = 0
     for k in range(count):
-        a = points[first + k]
-        inward = _cross(normal, points[first + (k + 1) % count] - a)
-        inward /= np.sqrt(_dot(inward, inward))
-        depth = _dot(point - a, inward)
+        a = _row(points, first + k)
+        inward = _cross(normal, _minus(_row(points, first + (k + 1) % count), a))
+        inward = _over(inward, np.sqrt(_dot(inward, inward)))
+        depth = _dot(_minus(point, a), inward)
         if depth > tol:
             continue
         on_sides += 1
@@ -244,49 +342,58 @@ def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
 
 
 @njit(cache=True)
-def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
-                lo, hi, diag, angle_tol, tol):  # fmt: skip
-    """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
-    itself), runs between lo and hi through the inside of two coplanar faces of different objects facing
-    each other (a box against a wall, a box's bottom on the floor): objects in contact, whose touching faces
-    hide each other; such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
-    in_plane (n_sliding,) bool: the faces whose plane holds every displaced line."""
-    for k in range(n_sliding):
+def _sandwiched(geometry, line, in_plane, alpha, beta, lo, hi):
+    """Whether the line, moved by the displacement alpha + (tau / diag) beta (zero: the line itself), runs
+    between lo and hi through the inside of two coplanar faces of different objects facing each other (a box
+    against a wall, a box's bottom on the floor): objects in contact, whose touching faces hide each other;
+    such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
+    in_plane (n_sliding,) bool: the sliding faces whose plane holds every displaced line."""
+    normals = geometry.normals
+    object_ids = geometry.object_ids
+    sl_poly = line.sl_poly
+    sl_a = line.sl_a
+    sl_b = line.sl_b
+    for k in range(line.n_sliding):
         if not in_plane[k]:
             continue
-        for m in range(k + 1, n_sliding):
+        for m in range(k + 1, line.n_sliding):
             if not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
                 continue
-            if _dot(normals[sl_poly[k]], normals[sl_poly[m]]) > -1.0 + angle_tol:
+            if _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) > -1.0 + geometry.angle_tol:
                 continue
             a = max(max(sl_a[k], sl_a[m]), lo)
             b = min(min(sl_b[k], sl_b[m]), hi)
-            if b - a <= _CONTACT_LENGTHS * tol:
+            if b - a <= _CONTACT_LENGTHS * geometry.tol:
                 continue
             tau = 0.5 * (a + b)
-            point = start + tau * u
-            delta = alpha + (tau / diag) * beta
-            if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol) and \
-                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol):  # fmt: skip
+            point = _along(line.start, tau, line.u)
+            delta = _along(alpha, tau / geometry.diag, beta)
+            if _inside_to_first_order(geometry, sl_poly[k], point, delta) and \
+                    _inside_to_first_order(geometry, sl_poly[m], point, delta):  # fmt: skip
                 return True
     return False
 
 
 @njit(cache=True)
-def _solve4(m, rhs):
-    """Solve the 4x4 system m x = rhs by Gaussian elimination with partial pivoting; (ok, x)."""
-    a = m.copy()
-    b = rhs.copy()
-    scale = np.max(np.abs(a))
+def _solve4(a, b, x):
+    """Solve the 4x4 system a x = b by Gaussian elimination with partial pivoting, in place: a (4, 4) and b (4,)
+    float64 are overwritten, x (4,) float64 receives the solution. Returns whether the system is regular."""
+    # the largest magnitude, NaN when an entry is (as np.max(np.abs(a)))
+    scale = 0.0
+    for row in range(4):
+        for col in range(4):
+            magnitude = abs(a[row, col])
+            if magnitude > scale or np.isnan(magnitude):
+                scale = magnitude
     if scale == 0.0:
-        return False, b
+        return False
     for col in range(4):
         pivot = col
         for row in range(col + 1, 4):
             if abs(a[row, col]) > abs(a[pivot, col]):
                 pivot = row
         if abs(a[pivot, col]) <= 1e-12 * scale:
-            return False, b
+            return False
         if pivot != col:
             for k in range(4):
                 a[col, k], a[pivot, k] = a[pivot, k], a[col, k]
@@ -296,24 +403,23 @@ def _solve4(m, rhs):
             for k in range(col, 4):
                 a[row, k] -= factor * a[col, k]
             b[row] -= factor * b[col]
-    x = np.empty(4)
     for row in range(3, -1, -1):
         total = b[row]
         for k in range(row + 1, 4):
             total -= a[row, k] * x[k]
         x[row] = total / a[row, row]
-    return True, x
+    return True
 
 
 @njit(cache=True)
 def _edge_direction(vertices, edges, e, away_from):
-    """Unit direction (3,) of edge e, from its first vertex, or away from vertex `away_from` if >= 0."""
-    a = vertices[edges[e, 0]]
-    b = vertices[edges[e, 1]]
-    d = b - a
+    """Unit direction (3-tuple) of edge e, from its first vertex, or away from vertex `away_from` if >= 0."""
+    a = _row(vertices, edges[e, 0])
+    b = _row(vertices, edges[e, 1])
+    d = _minus(b, a)
     if away_from >= 0 and edges[e, 1] == away_from:
-        d = a - b
-    return d / np.sqrt(_dot(d, d))
+        d = _minus(a, b)
+    return _over(d, np.sqrt(_dot(d, d)))
 
 
 @njit(cache=True)
@@ -330,32 +436,30 @@ def _is_incident_face(poly, kind, gid, vf_off, vf_face, ef_off, ef_face):
 
 
 @njit(cache=True)
-def _generator_blocked(
-    points, offsets, normals, kind, gid, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-    direction, angle_tol, polys, kinds, locals_, arc_start, arc_len,
-):  # fmt: skip
+def _generator_blocked(geometry, kind, gid, direction, scratch):
     """Whether the faces around generator (kind, gid) close around a line of this direction through it."""
+    polys = scratch.polys
+    kinds = scratch.kinds
+    locals_ = scratch.locals_
     count = 0
     if kind == GEN_VERTEX:
-        for i in range(vf_off[gid], vf_off[gid + 1]):
-            polys[count] = vf_face[i]
+        for i in range(geometry.vf_off[gid], geometry.vf_off[gid + 1]):
+            polys[count] = geometry.vf_face[i]
             kinds[count] = CONTACT_VERTEX
-            locals_[count] = vf_corner[i]
+            locals_[count] = geometry.vf_corner[i]
             count += 1
     else:
-        for i in range(ef_off[gid], ef_off[gid + 1]):
-            polys[count] = ef_face[i]
+        for i in range(geometry.ef_off[gid], geometry.ef_off[gid + 1]):
+            polys[count] = geometry.ef_face[i]
             kinds[count] = CONTACT_EDGE
-            locals_[count] = ef_local[i]
+            locals_[count] = geometry.ef_local[i]
             count += 1
-    return _group_blocked(
-        points, offsets, normals, polys, kinds, locals_, count, direction, angle_tol, arc_start, arc_len
-    )
+    return _group_blocked(geometry, polys, kinds, locals_, 0, count, direction, scratch)
 
 
 @njit(cache=True)
 def _meets_first(normals, areas, poly, key, best, best_key, travel):
-    """Whether a line travelling along `travel` (3,) meets polygon `poly` at position `key` before polygon
+    """Whether a line travelling along `travel` (3-vector) meets polygon `poly` at position `key` before polygon
     `best` at `best_key` (best < 0: none yet). Positions within _SIDE_EPS are one point: there the face whose
     front the line arrives at comes first (a table top before the bottom of a box resting on it, reached from
     its back, inside the box), then the smaller face (a picture on a wall), then the lower id."""
@@ -363,8 +467,8 @@ def _meets_first(normals, areas, poly, key, best, best_key, travel):
         return True
     if abs(key - best_key) > _SIDE_EPS * (1.0 + abs(key) + abs(best_key)):
         return key < best_key
-    front = _dot(normals[poly], travel) < 0.0
-    best_front = _dot(normals[best], travel) < 0.0
+    front = _dot(_row(normals, poly), travel) < 0.0
+    best_front = _dot(_row(normals, best), travel) < 0.0
     if front != best_front:
         return front
     if areas[poly] != areas[best]:
@@ -373,20 +477,20 @@ def _meets_first(normals, areas, poly, key, best, best_key, travel):
 
 
 @njit(cache=True)
-def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo, hi, delta, u, angle_tol, outward):
-    """Among contacts lo..hi-1 (one point), the polygon whose inside the displaced line crosses first going
-    `outward` (+1 along u, -1 against); -1 when it crosses none (grazed polygons do not count: lines sliding
-    past an edge in the plane of its face's neighbour go on). Ties: see _meets_first."""
+def _first_crossing(geometry, line, lo, hi, delta, outward):
+    """Among the line's contacts lo..hi-1 (one point), the polygon whose inside the line displaced by delta
+    crosses first going `outward` (+1 along u, -1 against); -1 when it crosses none (grazed polygons do not
+    count: lines sliding past an edge in the plane of its face's neighbour go on). Ties: see _meets_first."""
+    c_poly = line.c_poly
+    u = line.u
     best = -1
     best_shift = 0.0
     for i in range(lo, hi):
-        hit, shift = _displaced_hit(
-            points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol, -_SIDE_EPS
-        )
+        hit, shift = _displaced_hit(geometry, c_poly[i], line.c_kind[i], line.c_local[i], delta, u, -_SIDE_EPS)
         if not hit:
             continue
         key = shift * outward
-        if _meets_first(normals, areas, c_poly[i], key, best, best_shift, outward * u):
+        if _meets_first(geometry.normals, geometry.areas, c_poly[i], key, best, best_shift, _scaled(u, outward)):
             best = c_poly[i]
             best_shift = key
     return best
@@ -401,40 +505,40 @@ def _near_plane(point, normal, offset, tol):
 def _parallel_edges(vertices, edges, e, f, tol):
     """Whether edge f stays within tol of a line parallel to edge e over its whole length."""
     d = _edge_direction(vertices, edges, e, -1)
-    span = vertices[edges[f, 1]] - vertices[edges[f, 0]]
+    span = _minus(_row(vertices, edges[f, 1]), _row(vertices, edges[f, 0]))
     along = _dot(span, d)
-    off = span - along * d
+    off = _minus(span, _scaled(d, along))
     return _dot(off, off) <= tol * tol
 
 
 @njit(cache=True)
 def _side_along(points, offsets, poly, kind, local, motion, tol):
-    """The side of polygon `poly` at a contact (kind, local) that a point moving along `motion` (3,) from it
-    stays on (within tol of the line of that motion): the edge of an edge contact, the side leaving a vertex
+    """The side of polygon `poly` at a contact (kind, local) that a point moving along `motion` (3-vector) from
+    it stays on (within tol of the line of that motion): the edge of an edge contact, the side leaving a vertex
     contact's corner that way; -1 when none does."""
     first = offsets[poly]
     count = offsets[poly + 1] - first
-    d = motion / np.sqrt(_dot(motion, motion))
+    d = _over(motion, np.sqrt(_dot(motion, motion)))
     if kind == CONTACT_EDGE:
         candidates = (local, -1)
     elif kind == CONTACT_VERTEX:
         candidates = (local, (local - 1) % count)
     else:
         return -1
-    corner = points[first + local]
+    corner = _row(points, first + local)
     for k in candidates:
         if k < 0:
             continue
-        a = points[first + k]
-        b = points[first + (k + 1) % count]
-        span = b - a
-        off = span - _dot(span, d) * d
+        a = _row(points, first + k)
+        b = _row(points, first + (k + 1) % count)
+        span = _minus(b, a)
+        off = _minus(span, _scaled(d, _dot(span, d)))
         if _dot(off, off) > tol * tol:
             continue
         if kind == CONTACT_EDGE:
             return k
         # from the corner along the side, not back past the corner
-        leaving = b - corner if k == local else a - corner
+        leaving = _minus(b, corner) if k == local else _minus(a, corner)
         if _dot(leaving, d) > 0.0:
             return k
     return -1
@@ -468,41 +572,70 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
             for k in range(j + 1, 3):
                 if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol):
                     return True
-        a = vertices[edges[r_id[0], 0]]
-        normal = _cross(vertices[edges[r_id[0], 1]] - a, vertices[edges[r_id[1], 0]] - a)
+        a = _row(vertices, edges[r_id[0], 0])
+        tip = _minus(_row(vertices, edges[r_id[0], 1]), a)
+        normal = _cross(tip, _minus(_row(vertices, edges[r_id[1], 0]), a))
         length = np.sqrt(_dot(normal, normal))
         if length == 0.0:
-            normal = _cross(vertices[edges[r_id[0], 1]] - a, vertices[edges[r_id[1], 1]] - a)
+            normal = _cross(tip, _minus(_row(vertices, edges[r_id[1], 1]), a))
             length = np.sqrt(_dot(normal, normal))
         if length > 0.0:
-            normal /= length
+            normal = _over(normal, length)
             offset = -_dot(normal, a)
             for k in range(3):
                 for end in range(2):
-                    if not _near_plane(vertices[edges[r_id[k], end]], normal, offset, tol):
+                    if not _near_plane(_row(vertices, edges[r_id[k], end]), normal, offset, tol):
                         return False
             return True
     return False
 
 
 @njit(cache=True)
-def _relaxed_arc(
-    points, offsets, normals, areas, vertices, edges, n_vertices,
-    vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
-    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol, plane_offsets,
-    r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
-    sl_poly, sl_a, sl_b, n_sliding, object_ids,
-    polys, kinds, locals_, arc_start, arc_len, codes,
-):  # fmt: skip
-    """One arc adjacent to a node: the retained generators r_* (n_retained of them, in any order), the
-    motion normalised by sliding retained edge `norm_index` by sigma * norm_dir; r_pin (3,) int64: for a
-    retained edge met at one of its vertices, that vertex (its contact must move into the edge), else -1.
-    Fills codes (3,) with the generators in canonical line order; returns (ok, arc kind, end before, end
-    after, s, direction) where s is the node's coordinate on the arc's parameter edge (its lowest retained
-    edge id, 0..1 from its first vertex) and direction +1 when the arc extends towards larger s."""
-    f1, f2 = _perpendicular_frame(u)
-    m = np.zeros((4, 4))
-    rhs = np.zeros(4)
+def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch):
+    """One arc adjacent to a node of `line`: the retained generators (r_kind, r_id, r_group, r_pin) = retained
+    (3,) arrays, n_retained of them in any order, the motion normalised by sliding retained edge `norm_index` by
+    sigma * norm_dir (3-vector); r_pin: for a retained edge met at one of its vertices, that vertex (its contact
+    must move into the edge), else -1. Fills scratch.codes (3,) with the generators in canonical line order;
+    returns (ok, arc kind, end before, end after, s, direction) where s is the node's coordinate on the arc's
+    parameter edge (its lowest retained edge id, 0..1 from its first vertex) and direction +1 when the arc
+    extends towards larger s."""
+    normals = geometry.normals
+    areas = geometry.areas
+    vertices = geometry.vertices
+    edges = geometry.edges
+    vf_off = geometry.vf_off
+    vf_face = geometry.vf_face
+    vf_corner = geometry.vf_corner
+    ef_off = geometry.ef_off
+    ef_face = geometry.ef_face
+    face_group = geometry.face_group
+    diag = geometry.diag
+    tol = geometry.tol
+    c_poly = line.c_poly
+    c_kind = line.c_kind
+    c_local = line.c_local
+    g_lo = line.g_lo
+    g_hi = line.g_hi
+    g_tau = line.g_tau
+    sl_poly = line.sl_poly
+    sl_a = line.sl_a
+    sl_b = line.sl_b
+    n_sliding = line.n_sliding
+    u = line.u
+    f1 = line.f1
+    f2 = line.f2
+    r_kind, r_id, r_group, r_pin = retained
+    polys = scratch.polys
+    kinds = scratch.kinds
+    locals_ = scratch.locals_
+    m = scratch.system
+    rhs = scratch.rhs
+    x = scratch.solution
+
+    for row in range(4):
+        rhs[row] = 0.0
+        for col in range(4):
+            m[row, col] = 0.0
     row = 0
     for j in range(n_retained):
         tn = g_tau[r_group[j]] / diag
@@ -533,17 +666,16 @@ def _relaxed_arc(
             row += 1
     if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n_retained, tol):
         return False, 0, 0, 0, 0.0, 0
-    ok, x = _solve4(m, rhs)
-    if not ok:
+    if not _solve4(m, rhs, x):
         return False, 0, 0, 0, 0.0, 0
-    beta = x[2] * f1 + x[3] * f2
+    beta = _combined(x[2], f1, x[3], f2)
     beta_len = np.sqrt(_dot(beta, beta))
-    tilted = u.copy()
+    tilted = u
     if beta_len > 1e-12:
-        tilted = u + (_TILT / beta_len) * beta
-        tilted /= np.sqrt(_dot(tilted, tilted))
+        tilted = _along(u, _TILT / beta_len, beta)
+        tilted = _over(tilted, np.sqrt(_dot(tilted, tilted)))
 
-    first = n_groups
+    first = line.n_groups
     last = -1
     for j in range(n_retained):
         first = min(first, r_group[j])
@@ -551,14 +683,13 @@ def _relaxed_arc(
 
     # lines running between touching objects between the generators (see _sandwiched) are no arc
     if n_sliding >= 2:
-        in_plane = np.zeros(n_sliding, dtype=np.bool_)
+        in_plane = scratch.in_plane
         for k in range(n_sliding):
-            n = normals[sl_poly[k]]
+            n = _row(normals, sl_poly[k])
             in_plane[k] = abs(x[2] * _dot(n, f1) + x[3] * _dot(n, f2)) <= 1e-12 and \
                 abs(x[0] * _dot(n, f1) + x[1] * _dot(n, f2)) <= 1e-12  # fmt: skip
-        alpha = x[0] * f1 + x[1] * f2
-        if _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u,
-                       alpha, beta, g_tau[first], g_tau[last], diag, angle_tol, tol):  # fmt: skip
+        alpha = _combined(x[0], f1, x[1], f2)
+        if _sandwiched(geometry, line, in_plane, alpha, beta, g_tau[first], g_tau[last]):
             return False, 0, 0, 0, 0.0, 0
 
     # a face whose plane held the line is crossed where the displacement leaves its plane, if inside it
@@ -566,11 +697,17 @@ def _relaxed_arc(
     before_poly = -1
     after_tau = np.inf
     after_poly = -1
-    touch = np.zeros(2, dtype=np.bool_)
-    touch_face = np.full(2, -1, dtype=np.int64)
-    planar = np.zeros(2, dtype=np.bool_)
+    touch = scratch.touch
+    touch_face = scratch.touch_face
+    planar = scratch.planar
+    behind = scratch.behind
+    for side in range(2):
+        touch[side] = False
+        touch_face[side] = -1
+        planar[side] = False
+        behind[side] = -1
     for k in range(n_sliding):
-        n = normals[sl_poly[k]]
+        n = _row(normals, sl_poly[k])
         rate = x[2] * _dot(n, f1) + x[3] * _dot(n, f2)
         offset = x[0] * _dot(n, f1) + x[1] * _dot(n, f2)
         if abs(rate) <= 1e-12:
@@ -615,13 +752,15 @@ def _relaxed_arc(
                 if r_group[j] == (first if at == 0 else last):
                     if r_kind[j] == GEN_VERTEX:
                         touch[at] = True
-                    elif _meets_first(normals, areas, sl_poly[k], 0.0, touch_face[at], 0.0, u if at == 1 else -u):
+                    elif _meets_first(
+                        normals, areas, sl_poly[k], 0.0, touch_face[at], 0.0, u if at == 1 else _negated(u)
+                    ):
                         touch_face[at] = sl_poly[k]
             continue
         if g_tau[first] + tol < crossing < g_tau[last] - tol:
             return False, 0, 0, 0, 0.0, 0
         if crossing <= g_tau[first] + tol and _meets_first(
-            normals, areas, sl_poly[k], -crossing / diag, before_poly, -before_tau / diag, -u
+            normals, areas, sl_poly[k], -crossing / diag, before_poly, -before_tau / diag, _negated(u)
         ):
             before_tau = crossing
             before_poly = sl_poly[k]
@@ -633,10 +772,9 @@ def _relaxed_arc(
 
     blocked_first = False
     blocked_last = False
-    behind = np.full(2, -1, dtype=np.int64)
     for g in range(first, last + 1):
         tn = g_tau[g] / diag
-        delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
+        delta = _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2)
         j = -1
         for k in range(n_retained):
             if r_group[k] == g:
@@ -655,16 +793,11 @@ def _relaxed_arc(
                 kinds[count] = CONTACT_VERTEX
                 locals_[count] = vf_corner[i]
                 count += 1
-            blocked = _group_blocked(
-                points, offsets, normals, polys, kinds, locals_, count, tilted, angle_tol, arc_start, arc_len
-            )
+            blocked = _group_blocked(geometry, polys, kinds, locals_, 0, count, tilted, scratch)
         elif j >= 0:
             # the contact slides along the kept edge, so its position on the line moves too: a face met at
             # the same point is in front of the edge (the arc does not exist) or behind it (the line stops)
-            blocked = _generator_blocked(
-                points, offsets, normals, GEN_EDGE, r_id[j], vf_off, vf_face, vf_corner, ef_off, ef_face,
-                ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len,
-            )  # fmt: skip
+            blocked = _generator_blocked(geometry, GEN_EDGE, r_id[j], tilted, scratch)
             d = _edge_direction(vertices, edges, r_id[j], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
@@ -679,22 +812,22 @@ def _relaxed_arc(
                 for i in range(ef_off[r_id[j]], ef_off[r_id[j] + 1]):
                     polys[count] = ef_face[i]
                     kinds[count] = CONTACT_EDGE
-                    locals_[count] = ef_local[i]
+                    locals_[count] = geometry.ef_local[i]
                     count += 1
                 own = count
                 for i in range(g_lo[g], g_hi[g]):
                     if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
                         continue
-                    side_local = _side_along(points, offsets, c_poly[i], c_kind[i], c_local[i], slide * d, tol)
+                    side_local = _side_along(
+                        geometry.points, geometry.offsets, c_poly[i], c_kind[i], c_local[i], _scaled(d, slide), tol
+                    )
                     if side_local >= 0:
                         polys[count] = c_poly[i]
                         kinds[count] = CONTACT_EDGE
                         locals_[count] = side_local
                         count += 1
                 if count > own:
-                    blocked = _group_blocked(
-                        points, offsets, normals, polys, kinds, locals_, count, tilted, angle_tol, arc_start, arc_len
-                    )
+                    blocked = _group_blocked(geometry, polys, kinds, locals_, 0, count, tilted, scratch)
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
                 return False, 0, 0, 0, 0.0, 0
@@ -704,9 +837,7 @@ def _relaxed_arc(
             for i in range(g_lo[g], g_hi[g]):
                 if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
                     continue
-                hit, shift = _displaced_hit(
-                    points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol
-                )
+                hit, shift = _displaced_hit(geometry, c_poly[i], c_kind[i], c_local[i], delta, u)
                 if not hit:
                     continue
                 if g != first and g != last:
@@ -717,18 +848,16 @@ def _relaxed_arc(
                 # the lines cross this face just beyond the edge, or at it (the edge lies on the face: objects
                 # in contact): it ends them, as it does at the arc's other node (one key for both ends). Only
                 # its inside: lines grazing its side (sliding over a face of the edge to its corner) go on
-                inside, _ = _displaced_hit(
-                    points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol, -_SIDE_EPS
-                )
+                inside, _ = _displaced_hit(geometry, c_poly[i], c_kind[i], c_local[i], delta, u, -_SIDE_EPS)
                 if not inside:
                     continue
-                travel = u if g == last else -u
+                travel = u if g == last else _negated(u)
                 # an edge lying on the face (objects in contact) reached from behind the face: the lines between
                 # the generators run inside the other object (a box's bottom edge overhanging the top of the box
                 # it stands on, seen from under that top), or behind a panel that hides the edge from them. Only
                 # where the contact moves: lines kept through one point (where the edge crosses the face's side)
                 # cross the face's plane on its boundary, whatever rounding says
-                if ahead >= -_SIDE_EPS and _dot(normals[c_poly[i]], travel) > angle_tol and \
+                if ahead >= -_SIDE_EPS and _dot(_row(normals, c_poly[i]), travel) > geometry.angle_tol and \
                         _dot(delta, delta) > _SIDE_EPS * _SIDE_EPS:  # fmt: skip
                     return False, 0, 0, 0, 0.0, 0
                 beyond = max(-ahead, 0.0)
@@ -737,7 +866,7 @@ def _relaxed_arc(
                     behind[side] = c_poly[i]
         else:
             for i in range(g_lo[g], g_hi[g]):
-                hit, _ = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)
+                hit, _ = _displaced_hit(geometry, c_poly[i], c_kind[i], c_local[i], delta, u)
                 if hit:
                     blocked = True
                     break
@@ -760,10 +889,8 @@ def _relaxed_arc(
             if g_tau[g] < before_tau:
                 break
             tn = g_tau[g] / diag
-            delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
-            poly = _first_crossing(
-                points, offsets, normals, areas, c_poly, c_kind, c_local, g_lo[g], g_hi[g], delta, u, angle_tol, -1.0
-            )
+            delta = _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2)
+            poly = _first_crossing(geometry, line, g_lo[g], g_hi[g], delta, -1.0)
             if poly >= 0:
                 end_before = face_group[poly]
                 break
@@ -777,14 +904,12 @@ def _relaxed_arc(
     elif touch_face[1] >= 0:
         end_after = face_group[touch_face[1]]
     else:
-        for g in range(last + 1, n_groups):
+        for g in range(last + 1, line.n_groups):
             if g_tau[g] > after_tau:
                 break
             tn = g_tau[g] / diag
-            delta = (x[0] + tn * x[2]) * f1 + (x[1] + tn * x[3]) * f2
-            poly = _first_crossing(
-                points, offsets, normals, areas, c_poly, c_kind, c_local, g_lo[g], g_hi[g], delta, u, angle_tol, 1.0
-            )
+            delta = _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2)
+            poly = _first_crossing(geometry, line, g_lo[g], g_hi[g], delta, 1.0)
             if poly >= 0:
                 end_after = face_group[poly]
                 break
@@ -804,31 +929,59 @@ def _relaxed_arc(
         if r_kind[j] == GEN_VERTEX:
             has_vertex = True
     e = r_id[param]
-    a = vertices[edges[e, 0]]
-    b = vertices[edges[e, 1]]
-    along = b - a
-    contact = start + g_tau[r_group[param]] * u
-    s = _dot(contact - a, along) / _dot(along, along)
+    a = _row(vertices, edges[e, 0])
+    along = _minus(_row(vertices, edges[e, 1]), a)
+    contact = _along(line.start, g_tau[r_group[param]], u)
+    s = _dot(_minus(contact, a), along) / _dot(along, along)
     tn = g_tau[r_group[param]] / diag
-    d = along / np.sqrt(_dot(along, along))
+    d = _over(along, np.sqrt(_dot(along, along)))
     rate = (x[0] + tn * x[2]) * _dot(d, f1) + (x[1] + tn * x[3]) * _dot(d, f2)
     if abs(rate) <= 1e-12:
         return False, 0, 0, 0, 0.0, 0
     direction = 1 if rate > 0.0 else -1
 
-    # generators in line order, then the canonical orientation: lower code first
-    order = np.argsort(g_tau[r_group[:n_retained]])
+    # generators in line order (a stable insertion sort: two edges crossing at one point keep their order),
+    # then the canonical orientation: lower code first
+    order = scratch.order
+    for k in range(n_retained):
+        place = k
+        while place > 0 and g_tau[r_group[k]] < g_tau[r_group[order[place - 1]]]:
+            order[place] = order[place - 1]
+            place -= 1
+        order[place] = k
+    codes = scratch.codes
     for k in range(3):
         codes[k] = -1
     for k in range(n_retained):
         j = order[k]
-        codes[k] = r_id[j] if r_kind[j] == GEN_VERTEX else n_vertices + r_id[j]
+        codes[k] = r_id[j] if r_kind[j] == GEN_VERTEX else vertices.shape[0] + r_id[j]
     if codes[0] > codes[n_retained - 1]:
         for k in range(n_retained // 2):
             codes[k], codes[n_retained - 1 - k] = codes[n_retained - 1 - k], codes[k]
         end_before, end_after = end_after, end_before
     kind = ARC_EV if has_vertex else ARC_EEE
     return True, kind, end_before, end_after, s, direction
+
+
+@njit(cache=True)
+def _relax_into(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc,
+                node):  # fmt: skip
+    """_relaxed_arc of node `node`, recorded at row n_inc of `incidences` (_Incidences) when the arc exists;
+    returns the next free row."""
+    ok, kind, end_before, end_after, s, direction = _relaxed_arc(
+        geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch
+    )
+    if not ok:
+        return n_inc
+    incidences.node[n_inc] = node
+    incidences.kind[n_inc] = kind
+    for k in range(3):
+        incidences.codes[n_inc, k] = scratch.codes[k]
+    incidences.end[n_inc, 0] = end_before
+    incidences.end[n_inc, 1] = end_after
+    incidences.s[n_inc] = s
+    incidences.direction[n_inc] = direction
+    return n_inc + 1
 
 
 @njit(cache=True)
@@ -847,12 +1000,18 @@ def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
 
 @njit(cache=True, nogil=True)
 def _validate_chunk(
-    points, offsets, normals, plane_offsets, corner_vertex, corner_edge, areas,
-    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-    vertices, edges, vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_local, face_group,
-    object_ids, edge_mask, cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction,
-    lo, hi, diag, tol, angle_tol,
+    geometry, plane_offsets, corner_vertex, corner_edge, bvh_arrays, ve_off, ve_edge, edge_mask,
+    cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
+    points = geometry.points
+    offsets = geometry.offsets
+    normals = geometry.normals
+    vertices = geometry.vertices
+    edges = geometry.edges
+    vf_off = geometry.vf_off
+    face_group = geometry.face_group
+    tol = geometry.tol
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
     bound = 0
@@ -881,12 +1040,10 @@ def _validate_chunk(
     node_dir = np.empty((n_cand, 3))
     node_tau = np.zeros((n_cand, 4))
     node_end = np.empty((n_cand, 2), dtype=np.int64)
-    inc_node = np.empty(bound, dtype=np.int64)
-    inc_kind = np.empty(bound, dtype=np.int8)
-    inc_codes = np.empty((bound, 3), dtype=np.int64)
-    inc_end = np.empty((bound, 2), dtype=np.int64)
-    inc_s = np.empty(bound)
-    inc_dir = np.empty(bound, dtype=np.int8)
+    incidences = _Incidences(
+        np.empty(bound, dtype=np.int64), np.empty(bound, dtype=np.int8), np.empty((bound, 3), dtype=np.int64),
+        np.empty((bound, 2), dtype=np.int64), np.empty(bound), np.empty(bound, dtype=np.int8),
+    )  # fmt: skip
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
 
     capacity = 256
@@ -904,12 +1061,9 @@ def _validate_chunk(
     max_faces = 0
     for v in range(n_vertices):
         max_faces = max(max_faces, vf_off[v + 1] - vf_off[v])
-    scratch = capacity + max_faces
-    polys = np.empty(scratch, dtype=np.int64)
-    kinds = np.empty(scratch, dtype=np.int8)
-    locals_ = np.empty(scratch, dtype=np.int64)
-    arc_start = np.empty(scratch)
-    arc_len = np.empty(scratch)
+    scratch = _new_scratch(capacity + max_faces)
+    segment_start = np.empty(3)
+    segment_end = np.empty(3)
     gk = np.zeros(4, dtype=np.int8)
     gid = np.zeros(4, dtype=np.int64)
     gg = np.zeros(4, dtype=np.int64)
@@ -917,7 +1071,7 @@ def _validate_chunk(
     r_id = np.zeros(3, dtype=np.int64)
     r_group = np.zeros(3, dtype=np.int64)
     r_pin = np.full(3, -1, dtype=np.int64)
-    codes = np.zeros(3, dtype=np.int64)
+    retained = (r_kind, r_id, r_group, r_pin)
 
     n_nodes = 0
     n_inc = 0
@@ -933,18 +1087,23 @@ def _validate_chunk(
                 gk[ng] = GEN_EDGE
                 gid[ng] = cand_edges[c, k]
                 ng += 1
-        u = cand_direction[c] / np.sqrt(_dot(cand_direction[c], cand_direction[c]))
-        t0, t1 = _clip_line(cand_origin[c], u, lo, hi)
+        given = _row(cand_direction, c)
+        u = _over(given, np.sqrt(_dot(given, given)))
+        origin = _row(cand_origin, c)
+        t0, t1 = _clip_line(origin, u, lo, hi)
         if not t0 < t1:
             counters[REJECT_MISSING] += 1
             continue
-        start = cand_origin[c] + t0 * u
-        end = cand_origin[c] + t1 * u
+        start = _along(origin, t0, u)
+        end = _along(origin, t1, u)
+        for k in range(3):
+            segment_start[k] = start[k]
+            segment_end[k] = end[k]
         length = t1 - t0
         found = _gather_contacts(
             points, offsets, normals, plane_offsets,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-            start, end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
+            segment_start, segment_end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
         )  # fmt: skip
         if found > capacity:
             capacity = 2 * found
@@ -958,15 +1117,11 @@ def _validate_chunk(
             sl_poly = np.empty(capacity, dtype=np.int64)
             sl_a = np.empty(capacity)
             sl_b = np.empty(capacity)
-            polys = np.empty(capacity + max_faces, dtype=np.int64)
-            kinds = np.empty(capacity + max_faces, dtype=np.int8)
-            locals_ = np.empty(capacity + max_faces, dtype=np.int64)
-            arc_start = np.empty(capacity + max_faces)
-            arc_len = np.empty(capacity + max_faces)
+            scratch = _new_scratch(capacity + max_faces)
             found = _gather_contacts(
                 points, offsets, normals, plane_offsets,
                 node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-                start, end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
+                segment_start, segment_end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
             )  # fmt: skip
         _sort_contacts(c_poly, c_t, c_kind, c_local, found, tol / length)
         # lines lying in a face plane slide over it: an interval, not a point; kept apart from the point groups
@@ -974,7 +1129,7 @@ def _validate_chunk(
         kept = 0
         for i in range(found):
             if c_kind[i] == CONTACT_SLIDING:
-                tau_in, tau_out = _sliding_interval(points, offsets, normals, c_poly[i], start, u, length, tol)
+                tau_in, tau_out = _sliding_interval(geometry, c_poly[i], start, u, length)
                 if tau_in <= tau_out:
                     sl_poly[n_sliding] = c_poly[i]
                     sl_a[n_sliding] = tau_in
@@ -1038,11 +1193,7 @@ def _validate_chunk(
         # (core.skeleton.graph.coincident_nodes): the simplest configuration of seed 000 section 2.2
         blocked = False
         for g in range(first + 1, last):
-            count = g_hi[g] - g_lo[g]
-            if _group_blocked(
-                points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
-                angle_tol, arc_start, arc_len,
-            ):  # fmt: skip
+            if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, scratch):
                 blocked = True
                 break
         if blocked:
@@ -1060,34 +1211,31 @@ def _validate_chunk(
             node_kind[node] = NODE_E4
             for j in range(ng):
                 for k in range(j + 1, ng):
-                    if _shared_face(ef_off, ef_face, gid[j], gid[k]):
+                    if _shared_face(geometry.ef_off, geometry.ef_face, gid[j], gid[k]):
                         node_kind[node] = NODE_EFE if j == 1 and k == 2 else NODE_FEE
         for j in range(ng):
             node_gkind[node, j] = gk[j]
             node_gid[node, j] = gid[j]
             node_tau[node, j] = g_tau[gg[j]]
-        node_start[node] = start
-        node_dir[node] = u
+        for k in range(3):
+            node_start[node, k] = start[k]
+            node_dir[node, k] = u[k]
         for side in range(2):
             outer = first if side == 0 else last
-            count = g_hi[outer] - g_lo[outer]
             node_end[node, side] = END_FREE
-            if _group_blocked(
-                points, offsets, normals, c_poly[g_lo[outer]:], c_kind[g_lo[outer]:], c_local[g_lo[outer]:], count,
-                u, angle_tol, arc_start, arc_len,
-            ):  # fmt: skip
+            if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[outer], g_hi[outer], u, scratch):
                 node_end[node, side] = END_TERMINAL
                 continue
             g = outer - 1 if side == 0 else outer + 1
             while 0 <= g < n_groups:
-                count = g_hi[g] - g_lo[g]
-                if _group_blocked(
-                    points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
-                    angle_tol, arc_start, arc_len,
-                ):  # fmt: skip
+                if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, scratch):
                     node_end[node, side] = face_group[c_poly[g_lo[g]]]
                     break
                 g = g - 1 if side == 0 else g + 1
+
+        f1, f2 = _perpendicular_frame(u)
+        line = _Line(c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u,
+                     f1, f2)  # fmt: skip
 
         # a vertex generator lying on another element's edge (a box's corner on the room's floor edge, on the
         # top edge of the box it stands on, on the collinear edge of a box beside it): the arcs along that edge
@@ -1118,19 +1266,9 @@ def _validate_chunk(
                 n_retained += 1
             norm_dir = _edge_direction(vertices, edges, extra, -1)
             for sigma in (1.0, -1.0):
-                ok, kind, e0, e1, s, direction = _relaxed_arc(
-                    points, offsets, normals, areas, vertices, edges, n_vertices,
-                    vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
-                    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                    plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, sigma,
-                    sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
-                )  # fmt: skip
-                if not ok:
-                    continue
-                n_inc = _record_incidence(
-                    inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
-                    direction,
-                )  # fmt: skip
+                n_inc = _relax_into(
+                    geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
+                )
 
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
@@ -1146,11 +1284,7 @@ def _validate_chunk(
                 if e >= 0 and edge_mask[e]:
                     extra = e
                     break
-                count = g_hi[g] - g_lo[g]
-                if _group_blocked(
-                    points, offsets, normals, c_poly[g_lo[g]:], c_kind[g_lo[g]:], c_local[g_lo[g]:], count, u,
-                    angle_tol, arc_start, arc_len,
-                ):  # fmt: skip
+                if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, scratch):
                     break
                 g = g - 1 if side == 0 else g + 1
             if extra < 0:
@@ -1171,19 +1305,9 @@ def _validate_chunk(
                     n_retained += 1
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    ok, kind, e0, e1, s, direction = _relaxed_arc(
-                        points, offsets, normals, areas, vertices, edges, n_vertices,
-                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
-                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, sigma,
-                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
-                    )  # fmt: skip
-                    if not ok:
-                        continue
-                    n_inc = _record_incidence(
-                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
-                        direction,
-                    )  # fmt: skip
+                    n_inc = _relax_into(
+                        geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
+                    )
             # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
             # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
             # from it, the second's must follow into its edge from its vertex
@@ -1201,20 +1325,10 @@ def _validate_chunk(
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
                     r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
                     norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
-                    ok, kind, e0, e1, s, direction = _relaxed_arc(
-                        points, offsets, normals, areas, vertices, edges, n_vertices,
-                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
-                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, r_pin, 3, 0, norm_dir, 1.0,
-                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
-                    )  # fmt: skip
+                    n_inc = _relax_into(
+                        geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
+                    )
                     r_pin[1] = -1
-                    if not ok:
-                        continue
-                    n_inc = _record_incidence(
-                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
-                        direction,
-                    )  # fmt: skip
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
@@ -1234,19 +1348,9 @@ def _validate_chunk(
                     continue
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    ok, kind, e0, e1, s, direction = _relaxed_arc(
-                        points, offsets, normals, areas, vertices, edges, n_vertices,
-                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
-                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, sigma,
-                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
-                    )  # fmt: skip
-                    if not ok:
-                        continue
-                    n_inc = _record_incidence(
-                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
-                        direction,
-                    )  # fmt: skip
+                    n_inc = _relax_into(
+                        geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
+                    )
             else:
                 v = gid[j]
                 for slot in range(ve_off[v], ve_off[v + 1]):
@@ -1269,25 +1373,15 @@ def _validate_chunk(
                             norm = n_retained
                         n_retained += 1
                     norm_dir = _edge_direction(vertices, edges, e, v)
-                    ok, kind, e0, e1, s, direction = _relaxed_arc(
-                        points, offsets, normals, areas, vertices, edges, n_vertices,
-                        vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local, face_group,
-                        c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, start, u, diag, angle_tol, tol,
-                        plane_offsets, r_kind, r_id, r_group, r_pin, n_retained, norm, norm_dir, 1.0,
-                        sl_poly, sl_a, sl_b, n_sliding, object_ids, polys, kinds, locals_, arc_start, arc_len, codes,
-                    )  # fmt: skip
-                    if not ok:
-                        continue
-                    n_inc = _record_incidence(
-                        inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
-                        direction,
-                    )  # fmt: skip
+                    n_inc = _relax_into(
+                        geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
+                    )
     return (
         node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
         node_dir[:n_nodes], node_tau[:n_nodes], node_end[:n_nodes],
-        inc_node[:n_inc], inc_kind[:n_inc], inc_codes[:n_inc], inc_end[:n_inc], inc_s[:n_inc], inc_dir[:n_inc],
-        counters,
-    )
+        incidences.node[:n_inc], incidences.kind[:n_inc], incidences.codes[:n_inc], incidences.end[:n_inc],
+        incidences.s[:n_inc], incidences.direction[:n_inc], counters,
+    )  # fmt: skip
 
 
 def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS):
@@ -1330,18 +1424,21 @@ def _stacked(chunk_type, parts):
 
 def _validate_slice(scene, topology, bvh, candidates, edge_mask, lo: int, hi: int):
     """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice)."""
+    geometry = _Geometry(
+        scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
+        topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
+        scene.edge_faces, topology.edge_face_local, topology.face_group,
+        np.ascontiguousarray(scene.object_ids, dtype=np.int64), float(scene.diagonal), float(scene.tol.length),
+        float(scene.tol.cosine),
+    )  # fmt: skip
     grown = scene.diagonal
     result = _validate_chunk(
-        scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
-        scene.polygon_vertex_ids, scene.polygon_edge_ids, scene.areas, *bvh.arrays,
-        scene.vertices, scene.edges, topology.vertex_face_offsets, topology.vertex_faces,
-        topology.vertex_face_corner, topology.vertex_edge_offsets, topology.vertex_edges,
-        scene.edge_face_offsets, scene.edge_faces, topology.edge_face_local, topology.face_group,
-        np.ascontiguousarray(scene.object_ids, dtype=np.int64), np.ascontiguousarray(edge_mask, dtype=np.bool_),
+        geometry, scene.plane_offsets, scene.polygon_vertex_ids, scene.polygon_edge_ids, tuple(bvh.arrays),
+        topology.vertex_edge_offsets, topology.vertex_edges, np.ascontiguousarray(edge_mask, dtype=np.bool_),
         candidates.kind[lo:hi], candidates.vertices[lo:hi], candidates.edges[lo:hi],
         np.ascontiguousarray(candidates.origin[lo:hi], dtype=np.float64),
         np.ascontiguousarray(candidates.direction[lo:hi], dtype=np.float64),
-        scene.bbox_min - grown, scene.bbox_max + grown, scene.diagonal, scene.tol.length, scene.tol.cosine,
+        scene.bbox_min - grown, scene.bbox_max + grown,
     )  # fmt: skip
     (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end,
      i_node, i_kind, i_codes, i_end, i_s, i_dir, counters) = result  # fmt: skip
@@ -1392,18 +1489,3 @@ class IncidenceChunk:
 
     def __len__(self) -> int:
         return len(self.node)
-
-
-@njit(cache=True)
-def _record_incidence(inc_node, inc_kind, inc_codes, inc_end, inc_s, inc_dir, n_inc, node, kind, codes, e0, e1, s,
-                      direction):  # fmt: skip
-    """Store one arc incidence (node, kind, generator codes, end keys, parameter, direction) at row n_inc;
-    returns the next free row."""
-    inc_node[n_inc] = node
-    inc_kind[n_inc] = kind
-    inc_codes[n_inc] = codes
-    inc_end[n_inc, 0] = e0
-    inc_end[n_inc, 1] = e1
-    inc_s[n_inc] = s
-    inc_dir[n_inc] = direction
-    return n_inc + 1
