@@ -214,15 +214,15 @@ def _clip_line(origin, direction, lo, hi):
 
 
 @njit(cache=True)
-def _group_blocked(geometry, polys, kinds, locals_, lo, hi, direction, scratch):
+def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, direction, angle_tol, arc_start, arc_len,
+                   bounds):  # fmt: skip
     """Whether contacts lo..hi-1 of (polys, kinds, locals_), at one point, close around a line of the given
-    (unit) direction (it cannot pass there).
+    (unit) direction (it cannot pass there); arc_start, arc_len (hi - lo,) and bounds (2 (hi - lo),) float64 are
+    work arrays.
 
     A face whose plane holds the line projects along it to a ray, not a sector: it covers no direction around
     the line, so it is left out (its sector's side would otherwise be decided by rounding, and a line sliding
     along a face of a convex corner would count as entering the solid)."""
-    normals = geometry.normals
-    angle_tol = geometry.angle_tol
     # sectors cost a frame and arc tangents, and most points have fewer than two faces with one: count first
     members = 0
     for i in range(lo, hi):
@@ -235,33 +235,30 @@ def _group_blocked(geometry, polys, kinds, locals_, lo, hi, direction, scratch):
     if members < 2:
         return False
     e1, e2 = _perpendicular_frame(direction)
-    arc_start = scratch.arc_start
-    arc_len = scratch.arc_len
     members = 0
     for i in range(lo, hi):
         if kinds[i] != CONTACT_EDGE and kinds[i] != CONTACT_VERTEX:
             continue
         if abs(_dot(_row(normals, polys[i]), direction)) > angle_tol:
             arc_start[members], arc_len[members] = _contact_arc(
-                geometry.points, geometry.offsets, normals, polys[i], kinds[i], locals_[i], e1, e2
+                points, offsets, normals, polys[i], kinds[i], locals_[i], e1, e2
             )
             members += 1
-    return _arcs_cover_circle_with(arc_start, arc_len, members, angle_tol, scratch.bounds)
+    return _arcs_cover_circle_with(arc_start, arc_len, members, angle_tol, bounds)
 
 
 @njit(cache=True)
-def _displaced_hit(geometry, poly, kind, local, delta, u, margin=_SIDE_EPS):
+def _displaced_hit(points, offsets, normals, poly, kind, local, delta, u, angle_tol, margin=_SIDE_EPS):
     """First-order test: does the line displaced by the 3-vector `delta` (perpendicular to u) cross the polygon
     at the contact? Returns (hit, shift) where shift is how far along u the crossing moves (to order contacts).
 
     margin > 0 counts a displaced line that keeps grazing the contact (crossing on the polygon's boundary) as a
     hit, what deciding whether an arc is free needs; margin < 0 counts only lines crossing the polygon's
     inside, what finding where the lines end needs (a grazed face does not end them)."""
-    points = geometry.points
-    n = _row(geometry.normals, poly)
+    n = _row(normals, poly)
     nu = _dot(n, u)
     grazing = margin > 0.0
-    if abs(nu) <= geometry.angle_tol:
+    if abs(nu) <= angle_tol:
         return grazing, 0.0
     nd = _dot(n, delta)
     shift = -nd / nu
@@ -271,8 +268,8 @@ def _displaced_hit(geometry, poly, kind, local, delta, u, margin=_SIDE_EPS):
     q_len = np.sqrt(_dot(q, q))
     if q_len == 0.0:
         return grazing, shift
-    first = geometry.offsets[poly]
-    count = geometry.offsets[poly + 1] - first
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
     if kind == CONTACT_EDGE:
         m = _cross(n, _minus(_row(points, first + (local + 1) % count), _row(points, first + local)))
         return _dot(q, m) > -margin * q_len * np.sqrt(_dot(m, m)), shift
@@ -289,14 +286,12 @@ def _displaced_hit(geometry, poly, kind, local, delta, u, margin=_SIDE_EPS):
 
 
 @njit(cache=True)
-def _sliding_interval(geometry, poly, start, u, length):
+def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
     """(tau_in, tau_out): where the line start + tau u (tau in [0, length]), lying in the polygon's plane,
     overlaps the polygon; tau_in > tau_out when it does not."""
-    points = geometry.points
-    tol = geometry.tol
-    first = geometry.offsets[poly]
-    count = geometry.offsets[poly + 1] - first
-    normal = _row(geometry.normals, poly)
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = _row(normals, poly)
     lo = 0.0
     hi = length
     for k in range(count):
@@ -317,15 +312,13 @@ def _sliding_interval(geometry, poly, start, u, length):
 
 
 @njit(cache=True)
-def _inside_to_first_order(geometry, poly, point, delta):
+def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
     """Whether `point` (in the polygon's plane) moved by a small multiple of `delta` (in that plane) lies
     strictly inside the polygon: inside by more than tol from every side, or on one side and moving inwards.
     Within tol of two sides (a corner) a first-order motion tells nothing: not inside."""
-    points = geometry.points
-    tol = geometry.tol
-    first = geometry.offsets[poly]
-    count = geometry.offsets[poly + 1] - first
-    normal = _row(geometry.normals, poly)
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = _row(normals, poly)
     delta_len = np.sqrt(_dot(delta, delta))
     on_sides = 0
     for k in range(count):
@@ -348,8 +341,11 @@ def _sandwiched(geometry, line, in_plane, alpha, beta, lo, hi):
     against a wall, a box's bottom on the floor): objects in contact, whose touching faces hide each other;
     such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
     in_plane (n_sliding,) bool: the sliding faces whose plane holds every displaced line."""
+    points = geometry.points
+    offsets = geometry.offsets
     normals = geometry.normals
     object_ids = geometry.object_ids
+    tol = geometry.tol
     sl_poly = line.sl_poly
     sl_a = line.sl_a
     sl_b = line.sl_b
@@ -363,13 +359,13 @@ def _sandwiched(geometry, line, in_plane, alpha, beta, lo, hi):
                 continue
             a = max(max(sl_a[k], sl_a[m]), lo)
             b = min(min(sl_b[k], sl_b[m]), hi)
-            if b - a <= _CONTACT_LENGTHS * geometry.tol:
+            if b - a <= _CONTACT_LENGTHS * tol:
                 continue
             tau = 0.5 * (a + b)
             point = _along(line.start, tau, line.u)
             delta = _along(alpha, tau / geometry.diag, beta)
-            if _inside_to_first_order(geometry, sl_poly[k], point, delta) and \
-                    _inside_to_first_order(geometry, sl_poly[m], point, delta):  # fmt: skip
+            if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol) and \
+                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol):  # fmt: skip
                 return True
     return False
 
@@ -436,25 +432,27 @@ def _is_incident_face(poly, kind, gid, vf_off, vf_face, ef_off, ef_face):
 
 
 @njit(cache=True)
-def _generator_blocked(geometry, kind, gid, direction, scratch):
+def _generator_blocked(
+    points, offsets, normals, kind, gid, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+    direction, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
+):  # fmt: skip
     """Whether the faces around generator (kind, gid) close around a line of this direction through it."""
-    polys = scratch.polys
-    kinds = scratch.kinds
-    locals_ = scratch.locals_
     count = 0
     if kind == GEN_VERTEX:
-        for i in range(geometry.vf_off[gid], geometry.vf_off[gid + 1]):
-            polys[count] = geometry.vf_face[i]
+        for i in range(vf_off[gid], vf_off[gid + 1]):
+            polys[count] = vf_face[i]
             kinds[count] = CONTACT_VERTEX
-            locals_[count] = geometry.vf_corner[i]
+            locals_[count] = vf_corner[i]
             count += 1
     else:
-        for i in range(geometry.ef_off[gid], geometry.ef_off[gid + 1]):
-            polys[count] = geometry.ef_face[i]
+        for i in range(ef_off[gid], ef_off[gid + 1]):
+            polys[count] = ef_face[i]
             kinds[count] = CONTACT_EDGE
-            locals_[count] = geometry.ef_local[i]
+            locals_[count] = ef_local[i]
             count += 1
-    return _group_blocked(geometry, polys, kinds, locals_, 0, count, direction, scratch)
+    return _group_blocked(
+        points, offsets, normals, polys, kinds, locals_, 0, count, direction, angle_tol, arc_start, arc_len, bounds
+    )
 
 
 @njit(cache=True)
@@ -477,20 +475,20 @@ def _meets_first(normals, areas, poly, key, best, best_key, travel):
 
 
 @njit(cache=True)
-def _first_crossing(geometry, line, lo, hi, delta, outward):
-    """Among the line's contacts lo..hi-1 (one point), the polygon whose inside the line displaced by delta
-    crosses first going `outward` (+1 along u, -1 against); -1 when it crosses none (grazed polygons do not
-    count: lines sliding past an edge in the plane of its face's neighbour go on). Ties: see _meets_first."""
-    c_poly = line.c_poly
-    u = line.u
+def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo, hi, delta, u, angle_tol, outward):
+    """Among contacts lo..hi-1 (one point), the polygon whose inside the displaced line crosses first going
+    `outward` (+1 along u, -1 against); -1 when it crosses none (grazed polygons do not count: lines sliding
+    past an edge in the plane of its face's neighbour go on). Ties: see _meets_first."""
     best = -1
     best_shift = 0.0
     for i in range(lo, hi):
-        hit, shift = _displaced_hit(geometry, c_poly[i], line.c_kind[i], line.c_local[i], delta, u, -_SIDE_EPS)
+        hit, shift = _displaced_hit(
+            points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol, -_SIDE_EPS
+        )
         if not hit:
             continue
         key = shift * outward
-        if _meets_first(geometry.normals, geometry.areas, c_poly[i], key, best, best_shift, _scaled(u, outward)):
+        if _meets_first(normals, areas, c_poly[i], key, best, best_shift, _scaled(u, outward)):
             best = c_poly[i]
             best_shift = key
     return best
@@ -591,14 +589,22 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
 
 
 @njit(cache=True)
-def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch):
-    """One arc adjacent to a node of `line`: the retained generators (r_kind, r_id, r_group, r_pin) = retained
-    (3,) arrays, n_retained of them in any order, the motion normalised by sliding retained edge `norm_index` by
-    sigma * norm_dir (3-vector); r_pin: for a retained edge met at one of its vertices, that vertex (its contact
-    must move into the edge), else -1. Fills scratch.codes (3,) with the generators in canonical line order;
-    returns (ok, arc kind, end before, end after, s, direction) where s is the node's coordinate on the arc's
-    parameter edge (its lowest retained edge id, 0..1 from its first vertex) and direction +1 when the arc
-    extends towards larger s."""
+def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc,
+                 node):  # fmt: skip
+    """One arc adjacent to node `node` of `line`, recorded at row n_inc of `incidences` (_Incidences) when it
+    exists; returns the next free row.
+
+    The retained generators (r_kind, r_id, r_group, r_pin) = retained (3,) arrays, n_retained of them in any
+    order; the motion normalised by sliding retained edge `norm_index` by sigma * norm_dir (3-vector); r_pin:
+    for a retained edge met at one of its vertices, that vertex (its contact must move into the edge), else -1.
+    The row holds the arc kind, the generators in canonical line order, the end faces before and after them,
+    the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
+    vertex) and the direction, +1 when the arc extends towards larger s.
+
+    The arrays are unpacked once here and helpers get only the arrays they use: numba counts a reference to
+    every array of every argument on each call, and the named tuples hold dozens."""
+    points = geometry.points
+    offsets = geometry.offsets
     normals = geometry.normals
     areas = geometry.areas
     vertices = geometry.vertices
@@ -608,9 +614,11 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     vf_corner = geometry.vf_corner
     ef_off = geometry.ef_off
     ef_face = geometry.ef_face
+    ef_local = geometry.ef_local
     face_group = geometry.face_group
     diag = geometry.diag
     tol = geometry.tol
+    angle_tol = geometry.angle_tol
     c_poly = line.c_poly
     c_kind = line.c_kind
     c_local = line.c_local
@@ -628,6 +636,9 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     polys = scratch.polys
     kinds = scratch.kinds
     locals_ = scratch.locals_
+    arc_start = scratch.arc_start
+    arc_len = scratch.arc_len
+    bounds = scratch.bounds
     m = scratch.system
     rhs = scratch.rhs
     x = scratch.solution
@@ -665,9 +676,9 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             m[row, 3] = w1 * tn
             row += 1
     if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n_retained, tol):
-        return False, 0, 0, 0, 0.0, 0
+        return n_inc
     if not _solve4(m, rhs, x):
-        return False, 0, 0, 0, 0.0, 0
+        return n_inc
     beta = _combined(x[2], f1, x[3], f2)
     beta_len = np.sqrt(_dot(beta, beta))
     tilted = u
@@ -690,7 +701,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 abs(x[0] * _dot(n, f1) + x[1] * _dot(n, f2)) <= 1e-12  # fmt: skip
         alpha = _combined(x[0], f1, x[1], f2)
         if _sandwiched(geometry, line, in_plane, alpha, beta, g_tau[first], g_tau[last]):
-            return False, 0, 0, 0, 0.0, 0
+            return n_inc
 
     # a face whose plane held the line is crossed where the displacement leaves its plane, if inside it
     before_tau = -np.inf
@@ -758,7 +769,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                         touch_face[at] = sl_poly[k]
             continue
         if g_tau[first] + tol < crossing < g_tau[last] - tol:
-            return False, 0, 0, 0, 0.0, 0
+            return n_inc
         if crossing <= g_tau[first] + tol and _meets_first(
             normals, areas, sl_poly[k], -crossing / diag, before_poly, -before_tau / diag, _negated(u)
         ):
@@ -793,16 +804,21 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 kinds[count] = CONTACT_VERTEX
                 locals_[count] = vf_corner[i]
                 count += 1
-            blocked = _group_blocked(geometry, polys, kinds, locals_, 0, count, tilted, scratch)
+            blocked = _group_blocked(
+                points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start, arc_len, bounds
+            )
         elif j >= 0:
             # the contact slides along the kept edge, so its position on the line moves too: a face met at
             # the same point is in front of the edge (the arc does not exist) or behind it (the line stops)
-            blocked = _generator_blocked(geometry, GEN_EDGE, r_id[j], tilted, scratch)
+            blocked = _generator_blocked(
+                points, offsets, normals, GEN_EDGE, r_id[j], vf_off, vf_face, vf_corner, ef_off, ef_face,
+                ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
+            )  # fmt: skip
             d = _edge_direction(vertices, edges, r_id[j], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
             if w1 * w1 + w2 * w2 <= 1e-24:
-                return False, 0, 0, 0, 0.0, 0
+                return n_inc
             slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
             # another object's edge collinear with this one (boxes side by side or stacked flush), met here or
             # from its corner here on the side the contact slides to, keeps meeting the lines: its faces close
@@ -812,43 +828,48 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 for i in range(ef_off[r_id[j]], ef_off[r_id[j] + 1]):
                     polys[count] = ef_face[i]
                     kinds[count] = CONTACT_EDGE
-                    locals_[count] = geometry.ef_local[i]
+                    locals_[count] = ef_local[i]
                     count += 1
                 own = count
                 for i in range(g_lo[g], g_hi[g]):
                     if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
                         continue
-                    side_local = _side_along(
-                        geometry.points, geometry.offsets, c_poly[i], c_kind[i], c_local[i], _scaled(d, slide), tol
-                    )
+                    side_local = _side_along(points, offsets, c_poly[i], c_kind[i], c_local[i], _scaled(d, slide), tol)
                     if side_local >= 0:
                         polys[count] = c_poly[i]
                         kinds[count] = CONTACT_EDGE
                         locals_[count] = side_local
                         count += 1
                 if count > own:
-                    blocked = _group_blocked(geometry, polys, kinds, locals_, 0, count, tilted, scratch)
+                    blocked = _group_blocked(
+                        points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start,
+                        arc_len, bounds,
+                    )  # fmt: skip
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
-                return False, 0, 0, 0, 0.0, 0
+                return n_inc
             generator_shift = slide * _dot(d, u)
             nearest = np.inf
             side = 1 if g == last else 0
             for i in range(g_lo[g], g_hi[g]):
                 if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
                     continue
-                hit, shift = _displaced_hit(geometry, c_poly[i], c_kind[i], c_local[i], delta, u)
+                hit, shift = _displaced_hit(
+                    points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol
+                )
                 if not hit:
                     continue
                 if g != first and g != last:
-                    return False, 0, 0, 0, 0.0, 0
+                    return n_inc
                 ahead = shift - generator_shift if g == first else generator_shift - shift
                 if ahead > _SIDE_EPS:
-                    return False, 0, 0, 0, 0.0, 0
+                    return n_inc
                 # the lines cross this face just beyond the edge, or at it (the edge lies on the face: objects
                 # in contact): it ends them, as it does at the arc's other node (one key for both ends). Only
                 # its inside: lines grazing its side (sliding over a face of the edge to its corner) go on
-                inside, _ = _displaced_hit(geometry, c_poly[i], c_kind[i], c_local[i], delta, u, -_SIDE_EPS)
+                inside, _ = _displaced_hit(
+                    points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol, -_SIDE_EPS
+                )
                 if not inside:
                     continue
                 travel = u if g == last else _negated(u)
@@ -857,16 +878,16 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 # it stands on, seen from under that top), or behind a panel that hides the edge from them. Only
                 # where the contact moves: lines kept through one point (where the edge crosses the face's side)
                 # cross the face's plane on its boundary, whatever rounding says
-                if ahead >= -_SIDE_EPS and _dot(_row(normals, c_poly[i]), travel) > geometry.angle_tol and \
+                if ahead >= -_SIDE_EPS and _dot(_row(normals, c_poly[i]), travel) > angle_tol and \
                         _dot(delta, delta) > _SIDE_EPS * _SIDE_EPS:  # fmt: skip
-                    return False, 0, 0, 0, 0.0, 0
+                    return n_inc
                 beyond = max(-ahead, 0.0)
                 if _meets_first(normals, areas, c_poly[i], beyond, behind[side], nearest, travel):
                     nearest = beyond
                     behind[side] = c_poly[i]
         else:
             for i in range(g_lo[g], g_hi[g]):
-                hit, _ = _displaced_hit(geometry, c_poly[i], c_kind[i], c_local[i], delta, u)
+                hit, _ = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)
                 if hit:
                     blocked = True
                     break
@@ -875,7 +896,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
         elif g == last:
             blocked_last = blocked
         elif blocked:
-            return False, 0, 0, 0, 0.0, 0
+            return n_inc
 
     end_before = END_FREE
     if blocked_first or touch[0]:
@@ -890,7 +911,9 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 break
             tn = g_tau[g] / diag
             delta = _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2)
-            poly = _first_crossing(geometry, line, g_lo[g], g_hi[g], delta, -1.0)
+            poly = _first_crossing(
+                points, offsets, normals, areas, c_poly, c_kind, c_local, g_lo[g], g_hi[g], delta, u, angle_tol, -1.0
+            )
             if poly >= 0:
                 end_before = face_group[poly]
                 break
@@ -909,7 +932,9 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 break
             tn = g_tau[g] / diag
             delta = _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2)
-            poly = _first_crossing(geometry, line, g_lo[g], g_hi[g], delta, 1.0)
+            poly = _first_crossing(
+                points, offsets, normals, areas, c_poly, c_kind, c_local, g_lo[g], g_hi[g], delta, u, angle_tol, 1.0
+            )
             if poly >= 0:
                 end_after = face_group[poly]
                 break
@@ -937,7 +962,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     d = _over(along, np.sqrt(_dot(along, along)))
     rate = (x[0] + tn * x[2]) * _dot(d, f1) + (x[1] + tn * x[3]) * _dot(d, f2)
     if abs(rate) <= 1e-12:
-        return False, 0, 0, 0, 0.0, 0
+        return n_inc
     direction = 1 if rate > 0.0 else -1
 
     # generators in line order (a stable insertion sort: two edges crossing at one point keep their order),
@@ -959,24 +984,10 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
         for k in range(n_retained // 2):
             codes[k], codes[n_retained - 1 - k] = codes[n_retained - 1 - k], codes[k]
         end_before, end_after = end_after, end_before
-    kind = ARC_EV if has_vertex else ARC_EEE
-    return True, kind, end_before, end_after, s, direction
-
-
-@njit(cache=True)
-def _relax_into(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc,
-                node):  # fmt: skip
-    """_relaxed_arc of node `node`, recorded at row n_inc of `incidences` (_Incidences) when the arc exists;
-    returns the next free row."""
-    ok, kind, end_before, end_after, s, direction = _relaxed_arc(
-        geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch
-    )
-    if not ok:
-        return n_inc
     incidences.node[n_inc] = node
-    incidences.kind[n_inc] = kind
+    incidences.kind[n_inc] = ARC_EV if has_vertex else ARC_EEE
     for k in range(3):
-        incidences.codes[n_inc, k] = scratch.codes[k]
+        incidences.codes[n_inc, k] = codes[k]
     incidences.end[n_inc, 0] = end_before
     incidences.end[n_inc, 1] = end_after
     incidences.s[n_inc] = s
@@ -1011,6 +1022,7 @@ def _validate_chunk(
     vf_off = geometry.vf_off
     face_group = geometry.face_group
     tol = geometry.tol
+    angle_tol = geometry.angle_tol
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
@@ -1062,6 +1074,9 @@ def _validate_chunk(
     for v in range(n_vertices):
         max_faces = max(max_faces, vf_off[v + 1] - vf_off[v])
     scratch = _new_scratch(capacity + max_faces)
+    arc_start = scratch.arc_start
+    arc_len = scratch.arc_len
+    bounds = scratch.bounds
     segment_start = np.empty(3)
     segment_end = np.empty(3)
     gk = np.zeros(4, dtype=np.int8)
@@ -1118,6 +1133,9 @@ def _validate_chunk(
             sl_a = np.empty(capacity)
             sl_b = np.empty(capacity)
             scratch = _new_scratch(capacity + max_faces)
+            arc_start = scratch.arc_start
+            arc_len = scratch.arc_len
+            bounds = scratch.bounds
             found = _gather_contacts(
                 points, offsets, normals, plane_offsets,
                 node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
@@ -1129,7 +1147,7 @@ def _validate_chunk(
         kept = 0
         for i in range(found):
             if c_kind[i] == CONTACT_SLIDING:
-                tau_in, tau_out = _sliding_interval(geometry, c_poly[i], start, u, length)
+                tau_in, tau_out = _sliding_interval(points, offsets, normals, c_poly[i], start, u, length, tol)
                 if tau_in <= tau_out:
                     sl_poly[n_sliding] = c_poly[i]
                     sl_a[n_sliding] = tau_in
@@ -1193,7 +1211,10 @@ def _validate_chunk(
         # (core.skeleton.graph.coincident_nodes): the simplest configuration of seed 000 section 2.2
         blocked = False
         for g in range(first + 1, last):
-            if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, scratch):
+            if _group_blocked(
+                points, offsets, normals, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, angle_tol,
+                arc_start, arc_len, bounds,
+            ):  # fmt: skip
                 blocked = True
                 break
         if blocked:
@@ -1223,12 +1244,18 @@ def _validate_chunk(
         for side in range(2):
             outer = first if side == 0 else last
             node_end[node, side] = END_FREE
-            if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[outer], g_hi[outer], u, scratch):
+            if _group_blocked(
+                points, offsets, normals, c_poly, c_kind, c_local, g_lo[outer], g_hi[outer], u, angle_tol,
+                arc_start, arc_len, bounds,
+            ):  # fmt: skip
                 node_end[node, side] = END_TERMINAL
                 continue
             g = outer - 1 if side == 0 else outer + 1
             while 0 <= g < n_groups:
-                if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, scratch):
+                if _group_blocked(
+                    points, offsets, normals, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, angle_tol,
+                    arc_start, arc_len, bounds,
+                ):  # fmt: skip
                     node_end[node, side] = face_group[c_poly[g_lo[g]]]
                     break
                 g = g - 1 if side == 0 else g + 1
@@ -1266,7 +1293,7 @@ def _validate_chunk(
                 n_retained += 1
             norm_dir = _edge_direction(vertices, edges, extra, -1)
             for sigma in (1.0, -1.0):
-                n_inc = _relax_into(
+                n_inc = _relaxed_arc(
                     geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
 
@@ -1284,7 +1311,10 @@ def _validate_chunk(
                 if e >= 0 and edge_mask[e]:
                     extra = e
                     break
-                if _group_blocked(geometry, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, scratch):
+                if _group_blocked(
+                    points, offsets, normals, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, angle_tol,
+                    arc_start, arc_len, bounds,
+                ):  # fmt: skip
                     break
                 g = g - 1 if side == 0 else g + 1
             if extra < 0:
@@ -1305,7 +1335,7 @@ def _validate_chunk(
                     n_retained += 1
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relax_into(
+                    n_inc = _relaxed_arc(
                         geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                     )
             # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
@@ -1325,7 +1355,7 @@ def _validate_chunk(
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
                     r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
                     norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
-                    n_inc = _relax_into(
+                    n_inc = _relaxed_arc(
                         geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
                     r_pin[1] = -1
@@ -1348,7 +1378,7 @@ def _validate_chunk(
                     continue
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relax_into(
+                    n_inc = _relaxed_arc(
                         geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                     )
             else:
@@ -1373,7 +1403,7 @@ def _validate_chunk(
                             norm = n_retained
                         n_retained += 1
                     norm_dir = _edge_direction(vertices, edges, e, v)
-                    n_inc = _relax_into(
+                    n_inc = _relaxed_arc(
                         geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
     return (
