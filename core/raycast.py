@@ -263,11 +263,12 @@ def _dot(a, b):
 
 
 @njit(cache=True)
-def _edge_normal(a, b, normal):
-    """Unit vector in the polygon's plane, perpendicular to edge a-b and pointing out of the polygon."""
-    ex = b[0] - a[0]
-    ey = b[1] - a[1]
-    ez = b[2] - a[2]
+def _edge_normal(points, a, b, normal):
+    """Unit vector in the polygon's plane, perpendicular to edge points[a]-points[b] and pointing out of the
+    polygon. Points are read by component: a row view would cost two atomic reference counts."""
+    ex = points[b, 0] - points[a, 0]
+    ey = points[b, 1] - points[a, 1]
+    ez = points[b, 2] - points[a, 2]
     mx = ey * normal[2] - ez * normal[1]
     my = ez * normal[0] - ex * normal[2]
     mz = ex * normal[1] - ey * normal[0]
@@ -293,10 +294,9 @@ def _classify_point(points, first, count, normal, px, py, pz, tol):
     near = 0
     near_edge = -1
     for k in range(count):
-        a = points[first + k]
-        b = points[first + (k + 1) % count]
-        mx, my, mz = _edge_normal(a, b, normal)
-        distance = (px - a[0]) * mx + (py - a[1]) * my + (pz - a[2]) * mz
+        a = first + k
+        mx, my, mz = _edge_normal(points, a, first + (k + 1) % count, normal)
+        distance = (px - points[a, 0]) * mx + (py - points[a, 1]) * my + (pz - points[a, 2]) * mz
         if distance > tol:
             return CONTACT_NONE, -1
         if distance >= -tol:
@@ -322,7 +322,7 @@ def _classify_point(points, first, count, normal, px, py, pz, tol):
 @njit(cache=True)
 def _polygon_contact(points, offsets, normals, plane_offsets, polygon, start, end, tol):
     """Contact of the open segment start-end with one polygon: (CONTACT_*, t, local feature index or -1)."""
-    normal = normals[polygon]
+    normal = (normals[polygon, 0], normals[polygon, 1], normals[polygon, 2])
     d_start = _dot(normal, start) + plane_offsets[polygon]
     d_end = _dot(normal, end) + plane_offsets[polygon]
     first = offsets[polygon]
@@ -356,10 +356,9 @@ def _sliding_contact(points, first, count, normal, start, end, tol):
     hi = 1.0 - lo
     entry = lo
     for k in range(count):
-        a = points[first + k]
-        b = points[first + (k + 1) % count]
-        mx, my, mz = _edge_normal(a, b, normal)
-        offset = (start[0] - a[0]) * mx + (start[1] - a[1]) * my + (start[2] - a[2]) * mz
+        a = first + k
+        mx, my, mz = _edge_normal(points, a, first + (k + 1) % count, normal)
+        offset = (start[0] - points[a, 0]) * mx + (start[1] - points[a, 1]) * my + (start[2] - points[a, 2]) * mz
         rate = dx * mx + dy * my + dz * mz
         if rate == 0.0:
             if offset > tol:

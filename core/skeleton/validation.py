@@ -335,35 +335,28 @@ def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
 
 
 @njit(cache=True)
-def _sandwiched(geometry, line, in_plane, alpha, beta, lo, hi):
-    """Whether the line, moved by the displacement alpha + (tau / diag) beta (zero: the line itself), runs
-    between lo and hi through the inside of two coplanar faces of different objects facing each other (a box
-    against a wall, a box's bottom on the floor): objects in contact, whose touching faces hide each other;
-    such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
-    in_plane (n_sliding,) bool: the sliding faces whose plane holds every displaced line."""
-    points = geometry.points
-    offsets = geometry.offsets
-    normals = geometry.normals
-    object_ids = geometry.object_ids
-    tol = geometry.tol
-    sl_poly = line.sl_poly
-    sl_a = line.sl_a
-    sl_b = line.sl_b
-    for k in range(line.n_sliding):
+def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
+                lo, hi, diag, angle_tol, tol):  # fmt: skip
+    """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
+    itself), runs between lo and hi through the inside of two coplanar faces of different objects facing
+    each other (a box against a wall, a box's bottom on the floor): objects in contact, whose touching faces
+    hide each other; such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
+    in_plane (n_sliding,) bool: the faces whose plane holds every displaced line."""
+    for k in range(n_sliding):
         if not in_plane[k]:
             continue
-        for m in range(k + 1, line.n_sliding):
+        for m in range(k + 1, n_sliding):
             if not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
                 continue
-            if _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) > -1.0 + geometry.angle_tol:
+            if _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) > -1.0 + angle_tol:
                 continue
             a = max(max(sl_a[k], sl_a[m]), lo)
             b = min(min(sl_b[k], sl_b[m]), hi)
             if b - a <= _CONTACT_LENGTHS * tol:
                 continue
             tau = 0.5 * (a + b)
-            point = _along(line.start, tau, line.u)
-            delta = _along(alpha, tau / geometry.diag, beta)
+            point = _along(start, tau, u)
+            delta = _along(alpha, tau / diag, beta)
             if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol) and \
                     _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol):  # fmt: skip
                 return True
@@ -588,96 +581,81 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
     return False
 
 
-@njit(cache=True)
-def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc,
-                 node):  # fmt: skip
-    """One arc adjacent to node `node` of `line`, recorded at row n_inc of `incidences` (_Incidences) when it
-    exists; returns the next free row.
+@njit(cache=True, inline="always")
+def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc, node):
+    """_relaxed_arc of node `node` of `line` (_Line) with the retained generators (r_kind, r_id, r_group, r_pin) =
+    retained, recorded at row n_inc of `incidences` (_Incidences) when the arc exists; returns the next free row.
 
-    The retained generators (r_kind, r_id, r_group, r_pin) = retained (3,) arrays, n_retained of them in any
-    order; the motion normalised by sliding retained edge `norm_index` by sigma * norm_dir (3-vector); r_pin:
-    for a retained edge met at one of its vertices, that vertex (its contact must move into the edge), else -1.
+    Inlined (numba IR) where it is called, so that the named tuples are unpacked at no cost: numba counts a
+    reference to every array of every argument of a call, and they hold dozens."""
+    g = geometry
+    r_kind, r_id, r_group, r_pin = retained
+    return _relaxed_arc(
+        g.points, g.offsets, g.normals, g.areas, g.vertices, g.edges, g.vf_off, g.vf_face, g.vf_corner, g.ef_off,
+        g.ef_face, g.ef_local, g.face_group, g.object_ids, g.diag, g.tol, g.angle_tol,
+        line.c_poly, line.c_kind, line.c_local, line.g_lo, line.g_hi, line.g_tau, line.n_groups, line.sl_poly,
+        line.sl_a, line.sl_b, line.n_sliding, line.start, line.u, line.f1, line.f2,
+        r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
+        scratch.polys, scratch.kinds, scratch.locals_, scratch.arc_start, scratch.arc_len, scratch.bounds,
+        scratch.in_plane, scratch.system, scratch.rhs, scratch.solution, scratch.order, scratch.codes, scratch.touch,
+        scratch.touch_face, scratch.planar, scratch.behind, incidences, n_inc, node,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _relaxed_arc(
+    points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+    face_group, object_ids, diag, tol, angle_tol,
+    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2,
+    r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
+    polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
+    planar, behind, incidences, n_inc, node,
+):  # fmt: skip
+    """One arc adjacent to a node, recorded at row n_inc of `incidences` (_Incidences) when it exists; returns
+    the next free row. The scene (_Geometry fields), the node's line (_Line fields, the frame f1, f2
+    perpendicular to u), then the retained generators r_* (3,) arrays, n_retained of them in any order, the
+    motion normalised by sliding retained edge `norm_index` by sigma * norm_dir (3-vector); r_pin: for a retained
+    edge met at one of its vertices, that vertex (its contact must move into the edge), else -1; then the work
+    arrays (_Scratch fields, x the motion's coefficients).
+
     The row holds the arc kind, the generators in canonical line order, the end faces before and after them,
     the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
-    vertex) and the direction, +1 when the arc extends towards larger s.
-
-    The arrays are unpacked once here and helpers get only the arrays they use: numba counts a reference to
-    every array of every argument on each call, and the named tuples hold dozens."""
-    points = geometry.points
-    offsets = geometry.offsets
-    normals = geometry.normals
-    areas = geometry.areas
-    vertices = geometry.vertices
-    edges = geometry.edges
-    vf_off = geometry.vf_off
-    vf_face = geometry.vf_face
-    vf_corner = geometry.vf_corner
-    ef_off = geometry.ef_off
-    ef_face = geometry.ef_face
-    ef_local = geometry.ef_local
-    face_group = geometry.face_group
-    diag = geometry.diag
-    tol = geometry.tol
-    angle_tol = geometry.angle_tol
-    c_poly = line.c_poly
-    c_kind = line.c_kind
-    c_local = line.c_local
-    g_lo = line.g_lo
-    g_hi = line.g_hi
-    g_tau = line.g_tau
-    sl_poly = line.sl_poly
-    sl_a = line.sl_a
-    sl_b = line.sl_b
-    n_sliding = line.n_sliding
-    u = line.u
-    f1 = line.f1
-    f2 = line.f2
-    r_kind, r_id, r_group, r_pin = retained
-    polys = scratch.polys
-    kinds = scratch.kinds
-    locals_ = scratch.locals_
-    arc_start = scratch.arc_start
-    arc_len = scratch.arc_len
-    bounds = scratch.bounds
-    m = scratch.system
-    rhs = scratch.rhs
-    x = scratch.solution
-
+    vertex) and the direction, +1 when the arc extends towards larger s."""
     for row in range(4):
         rhs[row] = 0.0
         for col in range(4):
-            m[row, col] = 0.0
+            system[row, col] = 0.0
     row = 0
     for j in range(n_retained):
         tn = g_tau[r_group[j]] / diag
         if r_kind[j] == GEN_VERTEX:
-            m[row, 0] = 1.0
-            m[row, 2] = tn
-            m[row + 1, 1] = 1.0
-            m[row + 1, 3] = tn
+            system[row, 0] = 1.0
+            system[row, 2] = tn
+            system[row + 1, 1] = 1.0
+            system[row + 1, 3] = tn
             row += 2
         elif j == norm_index:
             w1 = _dot(norm_dir, f1)
             w2 = _dot(norm_dir, f2)
-            m[row, 0] = 1.0
-            m[row, 2] = tn
+            system[row, 0] = 1.0
+            system[row, 2] = tn
             rhs[row] = sigma * w1
-            m[row + 1, 1] = 1.0
-            m[row + 1, 3] = tn
+            system[row + 1, 1] = 1.0
+            system[row + 1, 3] = tn
             rhs[row + 1] = sigma * w2
             row += 2
         else:
             d = _edge_direction(vertices, edges, r_id[j], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
-            m[row, 0] = -w2
-            m[row, 1] = w1
-            m[row, 2] = -w2 * tn
-            m[row, 3] = w1 * tn
+            system[row, 0] = -w2
+            system[row, 1] = w1
+            system[row, 2] = -w2 * tn
+            system[row, 3] = w1 * tn
             row += 1
     if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n_retained, tol):
         return n_inc
-    if not _solve4(m, rhs, x):
+    if not _solve4(system, rhs, x):
         return n_inc
     beta = _combined(x[2], f1, x[3], f2)
     beta_len = np.sqrt(_dot(beta, beta))
@@ -686,7 +664,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
         tilted = _along(u, _TILT / beta_len, beta)
         tilted = _over(tilted, np.sqrt(_dot(tilted, tilted)))
 
-    first = line.n_groups
+    first = n_groups
     last = -1
     for j in range(n_retained):
         first = min(first, r_group[j])
@@ -694,13 +672,13 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
 
     # lines running between touching objects between the generators (see _sandwiched) are no arc
     if n_sliding >= 2:
-        in_plane = scratch.in_plane
         for k in range(n_sliding):
             n = _row(normals, sl_poly[k])
             in_plane[k] = abs(x[2] * _dot(n, f1) + x[3] * _dot(n, f2)) <= 1e-12 and \
                 abs(x[0] * _dot(n, f1) + x[1] * _dot(n, f2)) <= 1e-12  # fmt: skip
         alpha = _combined(x[0], f1, x[1], f2)
-        if _sandwiched(geometry, line, in_plane, alpha, beta, g_tau[first], g_tau[last]):
+        if _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u,
+                       alpha, beta, g_tau[first], g_tau[last], diag, angle_tol, tol):  # fmt: skip
             return n_inc
 
     # a face whose plane held the line is crossed where the displacement leaves its plane, if inside it
@@ -708,10 +686,6 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     before_poly = -1
     after_tau = np.inf
     after_poly = -1
-    touch = scratch.touch
-    touch_face = scratch.touch_face
-    planar = scratch.planar
-    behind = scratch.behind
     for side in range(2):
         touch[side] = False
         touch_face[side] = -1
@@ -927,7 +901,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     elif touch_face[1] >= 0:
         end_after = face_group[touch_face[1]]
     else:
-        for g in range(last + 1, line.n_groups):
+        for g in range(last + 1, n_groups):
             if g_tau[g] > after_tau:
                 break
             tn = g_tau[g] / diag
@@ -956,7 +930,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     e = r_id[param]
     a = _row(vertices, edges[e, 0])
     along = _minus(_row(vertices, edges[e, 1]), a)
-    contact = _along(line.start, g_tau[r_group[param]], u)
+    contact = _along(start, g_tau[r_group[param]], u)
     s = _dot(_minus(contact, a), along) / _dot(along, along)
     tn = g_tau[r_group[param]] / diag
     d = _over(along, np.sqrt(_dot(along, along)))
@@ -967,14 +941,12 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
 
     # generators in line order (a stable insertion sort: two edges crossing at one point keep their order),
     # then the canonical orientation: lower code first
-    order = scratch.order
     for k in range(n_retained):
         place = k
         while place > 0 and g_tau[r_group[k]] < g_tau[r_group[order[place - 1]]]:
             order[place] = order[place - 1]
             place -= 1
         order[place] = k
-    codes = scratch.codes
     for k in range(3):
         codes[k] = -1
     for k in range(n_retained):
@@ -1293,7 +1265,7 @@ def _validate_chunk(
                 n_retained += 1
             norm_dir = _edge_direction(vertices, edges, extra, -1)
             for sigma in (1.0, -1.0):
-                n_inc = _relaxed_arc(
+                n_inc = _relax(
                     geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
 
@@ -1335,7 +1307,7 @@ def _validate_chunk(
                     n_retained += 1
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relaxed_arc(
+                    n_inc = _relax(
                         geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                     )
             # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
@@ -1355,7 +1327,7 @@ def _validate_chunk(
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
                     r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
                     norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
-                    n_inc = _relaxed_arc(
+                    n_inc = _relax(
                         geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
                     r_pin[1] = -1
@@ -1378,7 +1350,7 @@ def _validate_chunk(
                     continue
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relaxed_arc(
+                    n_inc = _relax(
                         geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                     )
             else:
@@ -1403,7 +1375,7 @@ def _validate_chunk(
                             norm = n_retained
                         n_retained += 1
                     norm_dir = _edge_direction(vertices, edges, e, v)
-                    n_inc = _relaxed_arc(
+                    n_inc = _relax(
                         geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
     return (
