@@ -42,6 +42,7 @@ from ..raycast import (
     _contact_arc,
     _gather_contacts,
     _perpendicular_frame,
+    _polygon_contact,
     _sort_contacts,
 )
 
@@ -968,6 +969,27 @@ def _relaxed_arc(
 
 
 @njit(cache=True)
+def _generator_met(points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off,
+                   ef_face, kind, gid, start, end, tol):  # fmt: skip
+    """Whether the segment start-end (3,) touches generator (kind, gid): a vertex contact at that vertex or an
+    edge contact along that edge on one of its own faces. Contacts are found polygon by polygon, so this is
+    what casting the segment through the whole scene would find there, for a few polygons' work."""
+    if kind == GEN_VERTEX:
+        for i in range(vf_off[gid], vf_off[gid + 1]):
+            poly = vf_face[i]
+            contact, _, local = _polygon_contact(points, offsets, normals, plane_offsets, poly, start, end, tol)
+            if contact == CONTACT_VERTEX and corner_vertex[offsets[poly] + local] == gid:
+                return True
+        return False
+    for i in range(ef_off[gid], ef_off[gid + 1]):
+        poly = ef_face[i]
+        contact, _, local = _polygon_contact(points, offsets, normals, plane_offsets, poly, start, end, tol)
+        if contact == CONTACT_EDGE and corner_edge[offsets[poly] + local] == gid:
+            return True
+    return False
+
+
+@njit(cache=True)
 def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
     """The scene edge every contact lo..hi-1 lies on (all edge contacts of one edge), else -1."""
     edge = -1
@@ -992,6 +1014,9 @@ def _validate_chunk(
     vertices = geometry.vertices
     edges = geometry.edges
     vf_off = geometry.vf_off
+    vf_face = geometry.vf_face
+    ef_off = geometry.ef_off
+    ef_face = geometry.ef_face
     face_group = geometry.face_group
     tol = geometry.tol
     angle_tol = geometry.angle_tol
@@ -1086,6 +1111,18 @@ def _validate_chunk(
         for k in range(3):
             segment_start[k] = start[k]
             segment_end[k] = end[k]
+        # a line that misses a generator is rejected before the cast through the scene
+        missing = False
+        for j in range(ng):
+            if not _generator_met(
+                points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off, ef_face,
+                gk[j], gid[j], segment_start, segment_end, tol,
+            ):  # fmt: skip
+                missing = True
+                break
+        if missing:
+            counters[REJECT_MISSING] += 1
+            continue
         length = t1 - t0
         found = _gather_contacts(
             points, offsets, normals, plane_offsets,
@@ -1204,7 +1241,7 @@ def _validate_chunk(
             node_kind[node] = NODE_E4
             for j in range(ng):
                 for k in range(j + 1, ng):
-                    if _shared_face(geometry.ef_off, geometry.ef_face, gid[j], gid[k]):
+                    if _shared_face(ef_off, ef_face, gid[j], gid[k]):
                         node_kind[node] = NODE_EFE if j == 1 and k == 2 else NODE_FEE
         for j in range(ng):
             node_gkind[node, j] = gk[j]
