@@ -758,7 +758,14 @@ def _relaxed_arc(
 
     blocked_first = False
     blocked_last = False
-    for g in range(first, last + 1):
+    # the inner groups first: a face hit there rejects the arc before the outer generators' costlier tests
+    for step in range(last - first + 1):
+        if step < last - first - 1:
+            g = first + 1 + step
+        elif step == last - first - 1:
+            g = first
+        else:
+            g = last
         tn = g_tau[g] / diag
         delta = _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2)
         j = -1
@@ -784,42 +791,14 @@ def _relaxed_arc(
             )
         elif j >= 0:
             # the contact slides along the kept edge, so its position on the line moves too: a face met at
-            # the same point is in front of the edge (the arc does not exist) or behind it (the line stops)
-            blocked = _generator_blocked(
-                points, offsets, normals, GEN_EDGE, r_id[j], vf_off, vf_face, vf_corner, ef_off, ef_face,
-                ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
-            )  # fmt: skip
+            # the same point is in front of the edge (the arc does not exist) or behind it (the line stops).
+            # What can reject the arc comes before the faces closing around the edge, which cost arc tangents
             d = _edge_direction(vertices, edges, r_id[j], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
             if w1 * w1 + w2 * w2 <= 1e-24:
                 return n_inc
             slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
-            # another object's edge collinear with this one (boxes side by side or stacked flush), met here or
-            # from its corner here on the side the contact slides to, keeps meeting the lines: its faces close
-            # around them with the edge's own (lines over the seam of two coplanar tops go into the other box)
-            if not blocked and abs(slide) > _SIDE_EPS:
-                count = 0
-                for i in range(ef_off[r_id[j]], ef_off[r_id[j] + 1]):
-                    polys[count] = ef_face[i]
-                    kinds[count] = CONTACT_EDGE
-                    locals_[count] = ef_local[i]
-                    count += 1
-                own = count
-                for i in range(g_lo[g], g_hi[g]):
-                    if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
-                        continue
-                    side_local = _side_along(points, offsets, c_poly[i], c_kind[i], c_local[i], _scaled(d, slide), tol)
-                    if side_local >= 0:
-                        polys[count] = c_poly[i]
-                        kinds[count] = CONTACT_EDGE
-                        locals_[count] = side_local
-                        count += 1
-                if count > own:
-                    blocked = _group_blocked(
-                        points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start,
-                        arc_len, bounds,
-                    )  # fmt: skip
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
                 return n_inc
@@ -860,6 +839,35 @@ def _relaxed_arc(
                 if _meets_first(normals, areas, c_poly[i], beyond, behind[side], nearest, travel):
                     nearest = beyond
                     behind[side] = c_poly[i]
+            blocked = _generator_blocked(
+                points, offsets, normals, GEN_EDGE, r_id[j], vf_off, vf_face, vf_corner, ef_off, ef_face,
+                ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
+            )  # fmt: skip
+            # another object's edge collinear with this one (boxes side by side or stacked flush), met here or
+            # from its corner here on the side the contact slides to, keeps meeting the lines: its faces close
+            # around them with the edge's own (lines over the seam of two coplanar tops go into the other box)
+            if not blocked and abs(slide) > _SIDE_EPS:
+                count = 0
+                for i in range(ef_off[r_id[j]], ef_off[r_id[j] + 1]):
+                    polys[count] = ef_face[i]
+                    kinds[count] = CONTACT_EDGE
+                    locals_[count] = ef_local[i]
+                    count += 1
+                own = count
+                for i in range(g_lo[g], g_hi[g]):
+                    if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
+                        continue
+                    side_local = _side_along(points, offsets, c_poly[i], c_kind[i], c_local[i], _scaled(d, slide), tol)
+                    if side_local >= 0:
+                        polys[count] = c_poly[i]
+                        kinds[count] = CONTACT_EDGE
+                        locals_[count] = side_local
+                        count += 1
+                if count > own:
+                    blocked = _group_blocked(
+                        points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start,
+                        arc_len, bounds,
+                    )  # fmt: skip
         else:
             for i in range(g_lo[g], g_hi[g]):
                 hit, _ = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)
