@@ -196,6 +196,17 @@ def _new_scratch(size):
 
 
 @njit(cache=True)
+def _line_buffers(capacity):
+    """Buffers for the contacts of one line: polygon (int64), t, kind (int8), local (int64); groups lo, hi
+    (int64) and tau; sliding faces (int64) and their intervals from, to: (capacity,) each."""
+    return (
+        np.empty(capacity, dtype=np.int64), np.empty(capacity), np.empty(capacity, dtype=np.int8),
+        np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64),
+        np.empty(capacity), np.empty(capacity, dtype=np.int64), np.empty(capacity), np.empty(capacity),
+    )  # fmt: skip
+
+
+@njit(cache=True)
 def _clip_line(origin, direction, lo, hi):
     """Parameter range (t0, t1) of origin + t direction inside the box [lo, hi]; t0 > t1 when it misses."""
     t0 = -np.inf
@@ -1064,17 +1075,8 @@ def _validate_chunk(
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
 
     capacity = 256
-    c_poly = np.empty(capacity, dtype=np.int64)
-    c_t = np.empty(capacity)
-    c_kind = np.empty(capacity, dtype=np.int8)
-    c_local = np.empty(capacity, dtype=np.int64)
+    c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
     stack = np.empty(STACK_SIZE, dtype=np.int64)
-    g_lo = np.empty(capacity, dtype=np.int64)
-    g_hi = np.empty(capacity, dtype=np.int64)
-    g_tau = np.empty(capacity)
-    sl_poly = np.empty(capacity, dtype=np.int64)
-    sl_a = np.empty(capacity)
-    sl_b = np.empty(capacity)
     max_faces = 0
     for v in range(n_vertices):
         max_faces = max(max_faces, vf_off[v + 1] - vf_off[v])
@@ -1132,32 +1134,21 @@ def _validate_chunk(
             counters[REJECT_MISSING] += 1
             continue
         length = t1 - t0
-        found = _gather_contacts(
-            points, offsets, normals, plane_offsets,
-            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-            segment_start, segment_end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
-        )  # fmt: skip
-        if found > capacity:
-            capacity = 2 * found
-            c_poly = np.empty(capacity, dtype=np.int64)
-            c_t = np.empty(capacity)
-            c_kind = np.empty(capacity, dtype=np.int8)
-            c_local = np.empty(capacity, dtype=np.int64)
-            g_lo = np.empty(capacity, dtype=np.int64)
-            g_hi = np.empty(capacity, dtype=np.int64)
-            g_tau = np.empty(capacity)
-            sl_poly = np.empty(capacity, dtype=np.int64)
-            sl_a = np.empty(capacity)
-            sl_b = np.empty(capacity)
-            scratch = _new_scratch(capacity + max_faces)
-            arc_start = scratch.arc_start
-            arc_len = scratch.arc_len
-            bounds = scratch.bounds
+        # contacts beyond the buffers are counted, not written: grow them and cast again
+        while True:
             found = _gather_contacts(
                 points, offsets, normals, plane_offsets,
                 node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
                 segment_start, segment_end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
             )  # fmt: skip
+            if found <= capacity:
+                break
+            capacity = 2 * found
+            c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
+            scratch = _new_scratch(capacity + max_faces)
+            arc_start = scratch.arc_start
+            arc_len = scratch.arc_len
+            bounds = scratch.bounds
         _sort_contacts(c_poly, c_t, c_kind, c_local, found, tol / length)
         # lines lying in a face plane slide over it: an interval, not a point; kept apart from the point groups
         n_sliding = 0
