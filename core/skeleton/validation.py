@@ -994,16 +994,13 @@ def _generator_met(points, offsets, normals, plane_offsets, corner_vertex, corne
     edge contact along that edge on one of its own faces. Contacts are found polygon by polygon, so this is
     what casting the segment through the whole scene would find there, for a few polygons' work."""
     if kind == GEN_VERTEX:
-        for i in range(vf_off[gid], vf_off[gid + 1]):
-            poly = vf_face[i]
-            contact, _, local = _polygon_contact(points, offsets, normals, plane_offsets, poly, start, end, tol)
-            if contact == CONTACT_VERTEX and corner_vertex[offsets[poly] + local] == gid:
-                return True
-        return False
-    for i in range(ef_off[gid], ef_off[gid + 1]):
-        poly = ef_face[i]
+        faces, lo, hi, wanted, corner_ids = vf_face, vf_off[gid], vf_off[gid + 1], CONTACT_VERTEX, corner_vertex
+    else:
+        faces, lo, hi, wanted, corner_ids = ef_face, ef_off[gid], ef_off[gid + 1], CONTACT_EDGE, corner_edge
+    for i in range(lo, hi):
+        poly = faces[i]
         contact, _, local = _polygon_contact(points, offsets, normals, plane_offsets, poly, start, end, tol)
-        if contact == CONTACT_EDGE and corner_edge[offsets[poly] + local] == gid:
+        if contact == wanted and corner_ids[offsets[poly] + local] == gid:
             return True
     return False
 
@@ -1027,18 +1024,8 @@ def _validate_chunk(
     geometry, plane_offsets, corner_vertex, corner_edge, bvh_arrays, ve_off, ve_edge, edge_mask,
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
-    points = geometry.points
-    offsets = geometry.offsets
-    normals = geometry.normals
-    vertices = geometry.vertices
-    edges = geometry.edges
-    vf_off = geometry.vf_off
-    vf_face = geometry.vf_face
-    ef_off = geometry.ef_off
-    ef_face = geometry.ef_face
-    face_group = geometry.face_group
-    tol = geometry.tol
-    angle_tol = geometry.angle_tol
+    (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+     face_group, object_ids, diag, tol, angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
