@@ -130,7 +130,7 @@ _Incidences = namedtuple("_Incidences", "node kind codes end s direction")
 
 # ----------------------------------------------------------------------------------------------------------
 # 3-vectors: rows are read by component and small results are tuples, because a row view costs two atomic
-# reference counts and a small array a heap allocation, which together took most of the kernels' time
+# reference counts and a small array a heap allocation, which together took about half of the kernels' time
 
 
 @njit(cache=True)
@@ -229,8 +229,8 @@ def _clip_line(origin, direction, lo, hi):
 def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, direction, angle_tol, arc_start, arc_len,
                    bounds):  # fmt: skip
     """Whether contacts lo..hi-1 of (polys, kinds, locals_), at one point, close around a line of the given
-    (unit) direction (it cannot pass there); arc_start, arc_len (hi - lo,) and bounds (2 (hi - lo),) float64 are
-    work arrays.
+    (unit) direction (it cannot pass there); arc_start, arc_len (at least hi - lo,) and bounds (at least
+    2 (hi - lo),) float64 are work arrays.
 
     A face whose plane holds the line projects along it to a ray, not a sector: it covers no direction around
     the line, so it is left out (its sector's side would otherwise be decided by rounding, and a line sliding
@@ -598,8 +598,8 @@ def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, sc
     """_relaxed_arc of node `node` of `line` (_Line) with the retained generators (r_kind, r_id, r_group, r_pin) =
     retained, recorded at row n_inc of `incidences` (_Incidences) when the arc exists; returns the next free row.
 
-    Inlined (numba IR) where it is called, so that the named tuples are unpacked at no cost: numba counts a
-    reference to every array of every argument of a call, and they hold dozens."""
+    Inlined (numba IR) where it is called, so that only _relaxed_arc is a call: numba counts a reference to
+    every array argument of every call, and the named tuples hold dozens."""
     g = geometry
     r_kind, r_id, r_group, r_pin = retained
     return _relaxed_arc(
