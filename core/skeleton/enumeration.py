@@ -34,7 +34,9 @@ What prunes, and why each prune is safe (validation rejects every line pruned he
   the skeleton's record of built sources). An E4 pivot is dropped before its curves are tested when none
   of its lines E(s) X(t) can pass on one side of all the edges of a source: for each source, over the whole
   (s, t) region, the Pluecker side against one edge is strictly negative and against another strictly
-  positive.
+  positive. Before any clipping, a target (or an occluder of the depth maps) is skipped when no line through
+  the source bin and a source's bounding sphere passes through the target's bounding sphere (the double
+  cones of directions from the bin's middle, both spheres grown by the bin's half length).
 
 Outer generators get no local test: validation lets a line stop on its outer generators (a line leaving a
 floor corner), so a VV pair is never culled by the faces at its vertices, only by occlusion.
@@ -180,7 +182,7 @@ def iter_candidates(
             return _face_candidates(
                 polygon_ids, lo, hi, emask, g.vertices, g.edges, g.points, g.offsets, g.normals, g.plane_offsets,
                 g.edge_out, g.corner_edge, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.vf_off,
-                g.vf_face, g.ef_off, g.ef_face, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
+                g.vf_face, g.ef_off, g.ef_face, g.centres, g.radii, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
             )  # fmt: skip
         return _edge_candidates(
             edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
@@ -956,6 +958,20 @@ def _reaches_sources(q, b, centre, radius, src, centres, radii, normals, plane_o
             return True
         apart = np.arccos(min(1.0, abs(a0 * w0 + a1 * w1 + a2 * w2) / (da * dw)))
         if apart <= np.arcsin(spread / da) + target_angle + 1e-9:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
+    """Whether a line lying in polygon f's plane and crossing f may count as crossing a source (_line_meets):
+    it meets a source only where the source's bounding sphere reaches f's plane, and it lies in a source's
+    plane only where f comes within tol of that plane (the line passes through f, and a line in the plane
+    within tol.cosine of parallel strays from it by far less than tol across the scene; 4 tol is ample)."""
+    for p in src:
+        if abs(_dot(normals[f], centres[p]) + plane_offsets[f]) <= radii[p] + 4.0 * tol:
+            return True
+        if abs(_dot(normals[p], centres[f]) + plane_offsets[p]) <= radii[f] + 4.0 * tol:
             return True
     return False
 
@@ -1983,7 +1999,7 @@ def _edge_candidates(
 @njit(cache=True, nogil=True)
 def _face_candidates(
     polygon_ids, lo, hi, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, corner_edge,
-    vertex_object, edge_object, object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face,
+    vertex_object, edge_object, object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face, centres, radii,
     lazy, src, margin, delta, tol, angle_tol,
 ):  # fmt: skip
     """Lines lying in the plane of polygons polygon_ids[lo:hi] through the points where two masked edges cross
@@ -2003,6 +2019,8 @@ def _face_candidates(
     u = np.empty(3)
     for index in range(lo, hi):
         f = polygon_ids[index]
+        if lazy and not _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
+            continue
         normal = normals[f]
         first = offsets[f]
         corners = offsets[f + 1] - first
