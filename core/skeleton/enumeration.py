@@ -1289,11 +1289,13 @@ def _meet(o0, o1, o2, d0, d1, d2, a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
-def _meets_segment(o, d, vertices, edges, normals, ef_off, ef_face, f, tol, delta):
+def _meets_segment(o, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, f, tol, delta):
     """(ok, t): whether the line o + t d (d unit) meets edge f within tol, and where along the line.
 
-    A line through an end of f (within tol / 2, and crossing the plane of each face of f that near the end)
-    meets a corner there for validation, which then finds no contact with the edge: it is refused here."""
+    A line through an end of f (within tol / 2) meets a corner there for validation, which then finds no
+    contact with the edge, when each face of f is either crossed that near the end or exactly parallel to the
+    line (d . normal == 0, an axis-aligned line along an axis-aligned face) and within tol / 2 of its plane:
+    validation sets such a face aside as one the line slides over. Such a line is refused here."""
     a = vertices[edges[f, 0]]
     b = vertices[edges[f, 1]]
     ok, t, s, gap = _meet(o[0], o[1], o[2], d[0], d[1], d[2], a[0], a[1], a[2], b[0], b[1], b[2])
@@ -1304,10 +1306,16 @@ def _meets_segment(o, d, vertices, edges, normals, ef_off, ef_face, f, tol, delt
         return False, t
     near = min(abs(s * length), abs((1.0 - s) * length))
     if near <= 0.5 * tol:
-        steep = np.inf
+        at_corner = True
         for k in range(ef_off[f], ef_off[f + 1]):
-            steep = min(steep, abs(_dot(normals[ef_face[k]], d)))
-        if steep > delta and near + gap / steep <= 0.5 * tol:
+            face = ef_face[k]
+            rate = abs(_dot(normals[face], d))
+            if rate == 0.0:
+                if abs(_dot(normals[face], o) + plane_offsets[face]) > 0.5 * tol:
+                    at_corner = False
+            elif rate <= delta or near + gap / rate > 0.5 * tol:
+                at_corner = False
+        if at_corner:
             return False, t
     return True, t
 
@@ -1476,10 +1484,12 @@ def _vertex_candidates(
                         d[0] = -d[0]
                         d[1] = -d[1]
                         d[2] = -d[2]
-                    ok_f, tf = _meets_segment(p, d, vertices, edges, normals, ef_off, ef_face, f, tol, delta)
+                    ok_f, tf = _meets_segment(p, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, f, tol,
+                                                  delta)  # fmt: skip
                     if not ok_f:
                         continue
-                    ok_g, tg = _meets_segment(p, d, vertices, edges, normals, ef_off, ef_face, g, tol, delta)
+                    ok_g, tg = _meets_segment(p, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, g, tol,
+                                                  delta)  # fmt: skip
                     if not ok_g:
                         continue
                     side_f = 0 if tf > 0.0 else 1
@@ -1934,8 +1944,8 @@ def _edge_candidates(
                             reg[2] = rz
                             ok = True
                             for k in range(3):
-                                hit, tk = _meets_segment(start, d, vertices, edges, normals, ef_off, ef_face, gen[k],
-                                                         tol, delta)  # fmt: skip
+                                hit, tk = _meets_segment(start, d, vertices, edges, normals, plane_offsets, ef_off,
+                                                         ef_face, gen[k], tol, delta)  # fmt: skip
                                 side = 0 if tk > 0.0 else 1
                                 if not hit or side != sides[reg[k]] or abs(tk) > depth[b, side, cell] + margin:
                                     ok = False
