@@ -1677,21 +1677,6 @@ def _family_may_cross(ea, ed, h, xd, region, count, src, points, offsets, tol):
 
 
 @njit(cache=True)
-def _curve_band(c0, c1, c2, c3, s_lo, s_hi):
-    """(t_min, t_max): the values t takes on the zero set of c0 + c1 s + c2 t + c3 s t over s_lo <= s <= s_hi,
-    grown by a relative 1e-9 for rounding; unbounded when c2 + c3 s vanishes there (the zero set is the graph
-    of t = -(c0 + c1 s) / (c2 + c3 s), monotone between its poles, plus a line s = const at a pole)."""
-    den_lo = c2 + c3 * s_lo
-    den_hi = c2 + c3 * s_hi
-    if not den_lo * den_hi > 0.0:
-        return -np.inf, np.inf
-    t_lo = -(c0 + c1 * s_lo) / den_lo
-    t_hi = -(c0 + c1 * s_hi) / den_hi
-    grow = 1e-9 * (1.0 + max(abs(t_lo), abs(t_hi)))
-    return min(t_lo, t_hi) - grow, max(t_lo, t_hi) + grow
-
-
-@njit(cache=True)
 def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
     """The common zeros (s, t) of c0 + c1 s + c2 t + c3 s t and k0 + k1 s + k2 t + k3 s t, written to roots
     (2, 2); returns how many (0 also when the two curves coincide: infinitely many lines, no node)."""
@@ -1788,7 +1773,6 @@ def _edge_candidates(
     region = np.empty((16, 2))
     scratch = np.empty((16, 2))
     coef = np.empty((n_edges, 4))
-    band = np.empty((n_edges, 2))
     chosen = np.empty(n_edges, dtype=np.int64)
     gen = np.empty(3, dtype=np.int64)
     reg = np.empty(3, dtype=np.int64)
@@ -1911,7 +1895,6 @@ def _edge_candidates(
                     coef[n_chosen, 1] = c1
                     coef[n_chosen, 2] = c2
                     coef[n_chosen, 3] = c3
-                    band[n_chosen, 0], band[n_chosen, 1] = _curve_band(c0, c1, c2, c3, s_lo, s_hi)
                     n_chosen += 1
                 for ya in range(n_chosen):
                     ry = chosen[ya]
@@ -1920,9 +1903,6 @@ def _edge_candidates(
                         rz = chosen[za]
                         fz = ids[tgts[rz]]
                         if fz == fy or _share_vertex(edges, fy, fz) or bits[rx] & bits[ry] & bits[rz] == 0:
-                            continue
-                        # the curves can only meet over the bin where their t bands overlap
-                        if band[za, 0] > band[ya, 1] or band[ya, 0] > band[za, 1]:
                             continue
                         behind = sides[rx] + sides[ry] + sides[rz]
                         if behind == 0 or behind == 3:
