@@ -24,7 +24,7 @@ from numba import njit
 from ..bvh import build_bvh
 from ..errors import CancelledError, SceneError, VisradError
 from ..formfactor import clip_to_hemisphere, lambert_sum
-from ..raycast import CONTACT_VERTEX, _contact_arc, _perpendicular_frame
+from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular_frame, segments_occluded
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
@@ -33,6 +33,8 @@ from .topology import scene_topology
 from .validation import (
     ARC_EV,
     ARC_NAMES,
+    END_FREE,
+    END_PLANAR,
     NODE_NAMES,
     REJECT_NAMES,
     IncidenceChunk,
@@ -47,6 +49,11 @@ try:
     _malloc_trim = ctypes.CDLL("libc.so.6").malloc_trim
 except (OSError, AttributeError):
     _malloc_trim = None
+
+
+_PROBE_LENGTHS = 1e3
+"""How far (tolerance lengths) a probe line passes beside an arc's line at its edge: far above the tolerance a
+contact is decided within, far below the size of any feature of a sane scene."""
 
 
 def _return_free_memory() -> None:
@@ -80,6 +87,11 @@ class Skeleton:
             scene.vertices, scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
             scene.object_ids, self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
         )  # fmt: skip
+        self._through_offsets, self._through_edges = _edges_through(
+            scene.vertices, scene.edges, scene.edge_face_offsets, scene.edge_faces, scene.object_ids,
+            self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
+        )  # fmt: skip
+        self._collinear_offsets, self._collinear_edges = _collinear_edges(scene)
         self.sources: np.ndarray | None = np.empty(0, dtype=np.int64)
         self._node_parts: list[NodeChunk] = []
         self._incidence_parts: list[IncidenceChunk] = []
@@ -163,6 +175,7 @@ class Skeleton:
         scene = self.scene
         # the previous graph and its indexes go before the new ones are made
         self.nodes = self.arcs = self._vertex_arcs = self._arc_free = None
+        self._arc_cuts: dict[int, list[tuple[float, int]]] = {}
         self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
         nodes = _concatenated(NodeChunk, self._node_parts)
         _return_free_memory()
@@ -212,7 +225,8 @@ class Skeleton:
         self._arc_free = _arcs_leave_freely(
             arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
             scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
-            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, scene.tol.cosine,
+            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._through_offsets,
+            self._through_edges, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
         )  # fmt: skip
 
     # ------------------------------------------------------------------------------------------------------
@@ -426,29 +440,167 @@ class Skeleton:
         # an arc whose lines end exactly on the edge between the source and another face (its two nodes found
         # either) ends on the source
         ends_on_source = (arcs.ends[candidates, :, 1] == group).any(axis=1)
-        related = ends_on_source | self._edge_touches_group(edges, group)
+        bounds_source = self._edge_touches_group(edges, group)
+        # lines lying in a face's plane end where rounding puts them (END_PLANAR), lines said to leave the scene
+        # may end exactly on an edge (the concave edge of a room, where rounding finds neither wall), and an arc
+        # with nodes inside it changes what its lines meet there (see _cuts): the sides of those are probed,
+        # piece by piece
+        dangling = (arcs.node[candidates] < 0).any(axis=1)
+        probed = np.isin(arcs.ends[candidates, :, 1], (END_PLANAR, END_FREE)).any(axis=1) & ~bounds_source
+        cut = [not open_end and bool(self._cuts(int(arc))) for arc, open_end in zip(candidates, dangling, strict=True)]
+        probed |= np.array(cut, dtype=bool)
+        related = ends_on_source | bounds_source | probed
         segments = []
-        for arc, edge, on_source in zip(candidates[related], edges[related], ends_on_source[related], strict=True):
-            side = _seen_side(scene, topo, int(edge), group, apex, group if on_source else int(arcs.end[arc, 1]))
-            if side == 0:
-                continue
-            if (arcs.node[arc] < 0).any():
-                raise VisradError(
-                    f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
-                    f"{edge} lacks a node (build the skeleton completely or report the scene)"
-                )
+        # arcs along collinear edges overlapping (the top edges of two boxes side by side) are the same lines
+        # where the edges overlap: one swath between the same two nodes, traced once
+        traced = set()
+        for arc, edge, on_source, by_probe, open_end in zip(
+            candidates[related], edges[related], ends_on_source[related], probed[related], dangling[related],
+            strict=True,
+        ):
             if not self._arc_free[arc]:
                 continue
-            s0, s1 = arcs.s[arc]
-            n0, n1 = arcs.node[arc]
-            a, b = scene.vertices[scene.edges[edge]]
-            p0 = _onto_plane(apex, a + s0 * (b - a), normal, offset)
-            p1 = _onto_plane(apex, a + s1 * (b - a), normal, offset)
-            if _seen_on_left(apex, a, b, 0.5 * (s0 + s1), normal, offset, side):
-                segments.append((n0, n1, p0, p1))
+            if by_probe:
+                if open_end:
+                    continue
+                bounds = [(float(arcs.s[arc, 0]), int(arcs.node[arc, 0])), *self._cuts(int(arc))]
+                bounds.append((float(arcs.s[arc, 1]), int(arcs.node[arc, 1])))
+                pieces = [
+                    (s0, s1, n0, n1, self._probed_side(vertex, int(edge), 0.5 * (s0 + s1), group))
+                    for (s0, n0), (s1, n1) in zip(bounds[:-1], bounds[1:], strict=True)
+                ]
             else:
-                segments.append((n1, n0, p1, p0))
+                side = _seen_side(
+                    scene, topo, self._faces_along(int(edge), float(arcs.s[arc].mean())), int(edge), group, apex,
+                    group if on_source else int(arcs.end[arc, 1]),
+                )
+                if side != 0 and open_end:
+                    raise VisradError(
+                        f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
+                        f"{edge} lacks a node (build the skeleton completely or report the scene)"
+                    )
+                pieces = [(*arcs.s[arc], *arcs.node[arc], side)]
+            a, b = scene.vertices[scene.edges[edge]]
+            for s0, s1, n0, n1, side in pieces:
+                n0, n1 = int(n0), int(n1)
+                if side == 0 or (min(n0, n1), max(n0, n1)) in traced:
+                    continue
+                traced.add((min(n0, n1), max(n0, n1)))
+                p0 = _onto_plane(apex, a + s0 * (b - a), normal, offset)
+                p1 = _onto_plane(apex, a + s1 * (b - a), normal, offset)
+                if _seen_on_left(apex, a, b, 0.5 * (s0 + s1), normal, offset, side):
+                    segments.append((n0, n1, p0, p1))
+                else:
+                    segments.append((n1, n0, p1, p0))
         return _chain(segments, vertex, source)
+
+    def _cuts(self, arc: int) -> list[tuple[float, int]]:
+        """(s, node) in increasing s: the nodes through the vertex of EV arc `arc` whose line lies on its swath
+        strictly inside its range. Empty in a generic scene; in a degenerate one a corner of another object
+        lying in the plane the lines slide in (a box overhanging the one the vertex is on) changes what the
+        lines meet there without ending the arc. Cached: they depend on the graph only."""
+        if arc in self._arc_cuts:
+            return self._arc_cuts[arc]
+        scene, arcs = self.scene, self.arcs
+        vertex = int(arcs.codes[arc, 0])
+        edge = int(arcs.codes[arc, 1]) - scene.n_vertices
+        s = arcs.s[arc]
+        nodes = np.unique(arcs.node[self._vertex_arcs[self._vertex_offsets[vertex] : self._vertex_offsets[vertex + 1]]])
+        nodes = nodes[(nodes >= 0) & (nodes != arcs.node[arc, 0]) & (nodes != arcs.node[arc, 1])]
+        apex = scene.vertices[vertex]
+        a, b = scene.vertices[scene.edges[edge]]
+        along = b - a
+        directions = self.nodes.direction[nodes]
+        off_line = np.linalg.norm(np.cross(apex - self.nodes.start[nodes], directions), axis=1)
+        across = np.cross(along, directions)
+        scale = np.einsum("ij,ij->i", across, across)
+        through = (off_line <= scene.tol.snap) & (scale > scene.tol.cosine * (along @ along))
+        nodes, directions, across, scale = nodes[through], directions[through], across[through], scale[through]
+        at = -np.einsum("ij,ij->i", np.cross(a - apex, directions), across) / scale
+        miss = np.linalg.norm(np.cross(a + at[:, None] * along - apex, directions), axis=1)
+        length = np.linalg.norm(along)
+        inside = miss <= scene.tol.snap
+        inside &= ((at - s[0]) * length > scene.tol.snap) & ((s[1] - at) * length > scene.tol.snap)
+        order = np.argsort(at[inside])
+        cuts = list(zip(at[inside][order].tolist(), nodes[inside][order].tolist(), strict=True))
+        self._arc_cuts[arc] = cuts
+        return cuts
+
+    def _probed_side(self, vertex: int, edge: int, s: float, group: int) -> int:
+        """Which side of the swath (vertex, edge) (as in _seen_side) sees face group `group` at parameter s of
+        the edge, found by casting the line there moved off the swath to either side by _PROBE_LENGTHS
+        tolerance lengths at the edge: for arcs whose lines lie in a face's plane, where the faces along them
+        close around the lines on one side only (a box's side face pressed against another's, seen along their
+        contact plane). 0 when both sides or neither see it."""
+        scene = self.scene
+        apex = scene.vertices[vertex]
+        a, b = scene.vertices[scene.edges[edge]]
+        point = a + s * (b - a)
+        swath = np.cross(b - a, apex - a)
+        shift = _PROBE_LENGTHS * scene.tol.length * swath / np.linalg.norm(swath)
+        seen = []
+        for side in (1, -1):
+            direction = point + side * shift - apex
+            end = self._group_hit(apex, direction, group)
+            seen.append(
+                end is not None
+                and self._leaves_freely(vertex, direction)
+                and not segments_occluded(scene, self.bvh, apex[None], end[None])[0]
+            )
+        return 0 if seen[0] == seen[1] else (1 if seen[0] else -1)
+
+    def _leaves_freely(self, vertex: int, direction: np.ndarray) -> bool:
+        """Whether the line leaving scene vertex `vertex` along `direction` (3,) goes into free space (see
+        _leaves_freely): a segment starting there into a solid crosses no surface on its way."""
+        scene, topo = self.scene, self.topology
+        return bool(_leaves_freely(
+            vertex, direction, scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
+            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._through_offsets,
+            self._through_edges, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
+        ))  # fmt: skip
+
+    def _group_hit(self, origin: np.ndarray, direction: np.ndarray, group: int) -> np.ndarray | None:
+        """(3,) where the ray origin + t direction, t > 0, meets a polygon of face group `group` inside it (by
+        more than the tolerance length from its sides) and from its front if one-sided, or None."""
+        scene = self.scene
+        for polygon in self.topology.polygons_of_group(group):
+            normal = scene.normals[polygon]
+            rate = normal @ direction
+            if abs(rate) <= scene.tol.cosine * np.linalg.norm(direction):
+                continue
+            # a one-sided face reached from behind is reached through its own solid
+            if rate > 0.0 and not scene.two_sided[polygon]:
+                continue
+            t = -(normal @ origin + scene.plane_offsets[polygon]) / rate
+            if t <= 0.0:
+                continue
+            hit = origin + t * direction
+            corners = scene.polygon(int(polygon))
+            inward = np.cross(normal, np.roll(corners, -1, axis=0) - corners)
+            inward /= np.linalg.norm(inward, axis=1)[:, None]
+            if (np.einsum("kj,kj->k", hit - corners, inward) > scene.tol.length).all():
+                return hit
+        return None
+
+    def _faces_along(self, edge: int, s: float) -> list[tuple[int, int]]:
+        """(face, its edge) pairs around the point at parameter s of `edge`: the edge's own faces, and those of
+        other edges on the same line that hold the point (two boxes side by side: the top edges at their
+        contact overlap, and each box's faces there close around the other's edge as well)."""
+        scene = self.scene
+        faces = [(int(face), edge) for face in scene.edge_polygons(edge)]
+        others = self._collinear_edges[self._collinear_offsets[edge] : self._collinear_offsets[edge + 1]]
+        if len(others) == 0:
+            return faces
+        a, b = scene.vertices[scene.edges[edge]]
+        point = a + s * (b - a)
+        for other in others:
+            p, q = scene.vertices[scene.edges[other]]
+            along = q - p
+            length = np.linalg.norm(along)
+            t = (point - p) @ along / length
+            if scene.tol.length < t < length - scene.tol.length:
+                faces.extend((int(face), int(other)) for face in scene.edge_polygons(int(other)))
+        return faces
 
     def _edge_touches_group(self, edges: np.ndarray, group: int) -> np.ndarray:
         """(K,) bool: which of the edges (K,) int64 bound a polygon of face group `group`."""
@@ -756,9 +908,11 @@ def _inward(scene: Scene, face: int, edge: int) -> np.ndarray:
     return np.cross(scene.normals[face], along)
 
 
-def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: int) -> int:
+def _seen_side(scene: Scene, topology, faces: list[tuple[int, int]], edge: int, group: int, apex,
+               end_after: int) -> int:
     """Which side of the swath (apex, edge) sees the source's face group: +1 the side its normal
     cross(b - a, apex - a) points to, -1 the other, 0 when the swath bounds nothing of the source's view.
+    faces: the (face, its edge) pairs around the swath's points of the edge (Skeleton._faces_along).
 
     An edge of the source bounds its view where the lines just inside the source pass the edge's other faces:
     in the section across the edge, a face pointing between the apex and the source hides it, and so does a
@@ -770,14 +924,15 @@ def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: i
     along = b - a
     to_apex = apex - a
     swath = np.cross(along, to_apex)
-    faces = scene.edge_faces[scene.edge_face_offsets[edge] : scene.edge_face_offsets[edge + 1]]
-    own = faces[topology.face_group[faces] == group]
+    own = [(face, at) for face, at in faces if topology.face_group[face] == group]
     tol = scene.tol.length
-    if len(own):
-        into_source = _inward(scene, int(own[0]), edge)
+    if own:
+        into_source = _inward(scene, *own[0])
         turn = np.sign(np.cross(to_apex, into_source) @ along)
-        for face in faces[topology.face_group[faces] != group]:
-            into_face = _inward(scene, int(face), edge)
+        for face, at in faces:
+            if topology.face_group[face] == group:
+                continue
+            into_face = _inward(scene, face, at)
             if abs(scene.normals[face] @ to_apex) <= tol:
                 # the apex lies on this face's plane: the lines just inside the source leave it across the
                 # face, into the solid when the source is behind the face (a convex edge of a solid)
@@ -792,10 +947,10 @@ def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: i
         return 0
     best = 0.0
     side = 0
-    for face in faces:
+    for face, at in faces:
         if abs(scene.normals[face] @ to_apex) <= tol:
             continue
-        lean = swath @ _inward(scene, int(face), edge)
+        lean = swath @ _inward(scene, face, at)
         if abs(lean) > best:
             best = abs(lean)
             side = -int(np.sign(lean))
@@ -869,20 +1024,52 @@ def _resting_on(vertices, points, offsets, normals, plane_offsets, object_ids, v
 
 
 @njit(cache=True)
+def _edges_through(vertices, edges, ef_off, ef_face, object_ids, vf_off, vf_face, tol):
+    """CSR (offsets (V+1,) int64, edges int64): for each vertex, the edges of other objects passing through it
+    (within tol of the edge's line, more than tol from its ends): a box's corner on the edge of the box beside
+    it or under it. Lines from the vertex into the solid between that edge's faces enter the other object."""
+    n_vertices = vertices.shape[0]
+    # each edge looks at the vertices within its extent along x only
+    by_x = np.argsort(vertices[:, 0])
+    xs = vertices[by_x, 0]
+    counts = np.zeros(n_vertices + 1, dtype=np.int64)
+    through_vertex = []
+    through_edge = []
+    for e in range(edges.shape[0]):
+        a = vertices[edges[e, 0]]
+        b = vertices[edges[e, 1]]
+        along = b - a
+        length = np.sqrt(along @ along)
+        along = along / length
+        owner = object_ids[ef_face[ef_off[e]]]
+        lo = np.searchsorted(xs, min(a[0], b[0]) - tol, side="left")
+        hi = np.searchsorted(xs, max(a[0], b[0]) + tol, side="right")
+        for k in range(lo, hi):
+            v = by_x[k]
+            if vf_off[v] == vf_off[v + 1] or object_ids[vf_face[vf_off[v]]] == owner:
+                continue
+            offset = vertices[v] - a
+            t = offset @ along
+            if t <= tol or t >= length - tol:
+                continue
+            aside = offset - t * along
+            if aside @ aside <= tol * tol:
+                through_vertex.append(v)
+                through_edge.append(e)
+                counts[v + 1] += 1
+    order = np.argsort(np.array(through_vertex, dtype=np.int64), kind="mergesort")
+    return np.cumsum(counts), np.array(through_edge, dtype=np.int64)[order]
+
+
+@njit(cache=True)
 def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, points, offsets, normals,
-                       vf_off, vf_face, vf_corner, rest_off, rest_face, cosine):
+                       vf_off, vf_face, vf_corner, rest_off, rest_face, through_off, through_edge, ef_off, ef_face,
+                       ef_local, cosine):
     """(A,) bool: whether the lines of each EV arc leave its vertex towards its edge into free space, not into
-    the solid the vertex bounds (interior swaths, seed 003 section 3.1). Projected along the line, the faces
-    around the vertex are sectors; counted with the sign of normal . direction, they wind -1 around every
-    direction exactly when the line enters the solid there. Constant along an arc: the winding changes only
-    where the line slides over a face of the vertex, which ends the arc at a node. A vertex resting inside
-    another object's face (rest_off, rest_face: see _resting_on) sends the lines behind that face into its
-    object: those are not free either."""
+    the solid the vertex bounds (interior swaths, seed 003 section 3.1; see _leaves_freely). Constant along an
+    arc: the winding changes only where the line slides over a face of the vertex, which ends the arc at a
+    node."""
     result = np.ones(kind.shape[0], dtype=np.bool_)
-    starts = np.empty(64)
-    lengths = np.empty(64)
-    signs = np.empty(64)
-    bounds = np.empty(128)
     for arc in range(kind.shape[0]):
         if kind[arc] != ARC_EV or dangling[arc]:
             continue
@@ -890,47 +1077,111 @@ def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, po
         e = codes[arc, 1] - n_vertices
         t = 0.5 * (s[arc, 0] + s[arc, 1])
         a = vertices[edges[e, 0]]
-        direction = a + t * (vertices[edges[e, 1]] - a) - vertices[v]
-        direction /= np.sqrt(direction @ direction)
-        behind = False
-        for i in range(rest_off[v], rest_off[v + 1]):
-            if normals[rest_face[i]] @ direction < -cosine:
-                behind = True
-        if behind:
-            result[arc] = False
-            continue
-        e1, e2 = _perpendicular_frame(direction)
-        count = 0
-        for i in range(vf_off[v], min(vf_off[v + 1], vf_off[v] + 64)):
-            rate = normals[vf_face[i]] @ direction
-            if abs(rate) <= cosine:
-                continue
-            starts[count], lengths[count] = _contact_arc(
-                points, offsets, normals, vf_face[i], CONTACT_VERTEX, vf_corner[i], e1, e2
-            )
-            signs[count] = 1.0 if rate > 0.0 else -1.0
-            bounds[2 * count] = starts[count]
-            bounds[2 * count + 1] = (starts[count] + lengths[count]) % (2.0 * np.pi)
-            count += 1
-        if count == 0:
-            continue
-        ordered = np.sort(bounds[: 2 * count])
-        enters = True
-        for k in range(2 * count):
-            lo = ordered[k]
-            hi = ordered[k + 1] if k + 1 < 2 * count else ordered[0] + 2.0 * np.pi
-            if hi - lo <= cosine:
-                continue
-            middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
-            winding = 0.0
-            for j in range(count):
-                if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
-                    winding += signs[j]
-            if winding >= 0.0:
-                enters = False
-                break
-        result[arc] = not enters
+        result[arc] = _leaves_freely(
+            v, a + t * (vertices[edges[e, 1]] - a) - vertices[v], points, offsets, normals, vf_off, vf_face,
+            vf_corner, rest_off, rest_face, through_off, through_edge, ef_off, ef_face, ef_local, cosine,
+        )  # fmt: skip
     return result
+
+
+@njit(cache=True)
+def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
+                   through_off, through_edge, ef_off, ef_face, ef_local, cosine):
+    """Whether the line leaving vertex v along `direction` (3,) goes into free space, not into a solid. Its
+    own faces decide first (see _enters); a vertex resting inside another object's face (rest_off, rest_face:
+    see _resting_on) sends the lines behind that face into its object, and one on another object's edge
+    (through_off, through_edge: see _edges_through) the lines between that edge's faces, each edge's faces
+    winding on their own."""
+    direction = direction / np.sqrt(direction @ direction)
+    for i in range(rest_off[v], rest_off[v + 1]):
+        if normals[rest_face[i]] @ direction < -cosine:
+            return False
+    faces = np.empty(64, dtype=np.int64)
+    kinds = np.empty(64, dtype=np.int64)
+    corners = np.empty(64, dtype=np.int64)
+    e1, e2 = _perpendicular_frame(direction)
+    count = 0
+    for i in range(vf_off[v], min(vf_off[v + 1], vf_off[v] + 64)):
+        faces[count] = vf_face[i]
+        kinds[count] = CONTACT_VERTEX
+        corners[count] = vf_corner[i]
+        count += 1
+    if _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
+        return False
+    for j in range(through_off[v], through_off[v + 1]):
+        count = 0
+        for i in range(ef_off[through_edge[j]], min(ef_off[through_edge[j] + 1], ef_off[through_edge[j]] + 64)):
+            faces[count] = ef_face[i]
+            kinds[count] = CONTACT_EDGE
+            corners[count] = ef_local[i]
+            count += 1
+        if _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
+    """Whether a line leaving a point along unit `direction` (frame e1, e2 across it) enters a solid whose
+    faces meet there: faces[:count] touched as kinds[:count] (CONTACT_VERTEX at corner, CONTACT_EDGE along the
+    edge from corner) wind -1 around every direction, counted with the sign of normal . direction. Faces seen
+    edge-on (sliding) count nothing; with none left the line enters nothing."""
+    starts = np.empty(count)
+    lengths = np.empty(count)
+    signs = np.empty(count)
+    bounds = np.empty(2 * count)
+    n = 0
+    for i in range(count):
+        rate = normals[faces[i]] @ direction
+        if abs(rate) <= cosine:
+            continue
+        starts[n], lengths[n] = _contact_arc(points, offsets, normals, faces[i], kinds[i], corners[i], e1, e2)
+        signs[n] = 1.0 if rate > 0.0 else -1.0
+        bounds[2 * n] = starts[n]
+        bounds[2 * n + 1] = (starts[n] + lengths[n]) % (2.0 * np.pi)
+        n += 1
+    if n == 0:
+        return False
+    ordered = np.sort(bounds[: 2 * n])
+    for k in range(2 * n):
+        lo = ordered[k]
+        hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + 2.0 * np.pi
+        if hi - lo <= cosine:
+            continue
+        middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
+        winding = 0.0
+        for j in range(n):
+            if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
+                winding += signs[j]
+        if winding >= 0.0:
+            return False
+    return True
+
+
+def _collinear_edges(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """CSR (offsets (E+1,) int64, edges int64): for each edge, the other edges on its line (within the
+    tolerance length) overlapping it by more than that length: the top edges of two boxes of one height side
+    by side, a box's edge on the edge of the one it stands on."""
+    n_edges = len(scene.edges)
+    ends = scene.vertices[scene.edges]
+    direction = ends[:, 1] - ends[:, 0]
+    length = np.linalg.norm(direction, axis=1)
+    direction /= length[:, None]
+    line = coincident_nodes(ends[:, 0], direction, scene.diagonal, scene.tol.length)
+    tol = scene.tol.length
+    pairs = []
+    for root in np.flatnonzero(np.bincount(line, minlength=n_edges) > 1):
+        members = np.flatnonzero(line == root)
+        base, axis = ends[root, 0], direction[root]
+        lo = np.minimum(ends[members, 0] @ axis, ends[members, 1] @ axis) - base @ axis
+        hi = np.maximum(ends[members, 0] @ axis, ends[members, 1] @ axis) - base @ axis
+        overlap = np.minimum(hi[:, None], hi[None]) - np.maximum(lo[:, None], lo[None]) > tol
+        np.fill_diagonal(overlap, False)
+        pairs.extend(zip(members[np.nonzero(overlap)[0]], members[np.nonzero(overlap)[1]], strict=True))
+    pairs = np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
+    offsets = np.zeros(n_edges + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(np.bincount(pairs[:, 0], minlength=n_edges))
+    return offsets, pairs[:, 1]
 
 
 def _chain(segments, vertex: int, source: int) -> list[np.ndarray]:
