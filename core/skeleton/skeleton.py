@@ -16,7 +16,7 @@ from __future__ import annotations
 import ctypes
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numba import njit
@@ -24,7 +24,7 @@ from numba import njit
 from ..bvh import build_bvh
 from ..errors import CancelledError, SceneError, VisradError
 from ..formfactor import clip_to_hemisphere, lambert_sum
-from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular_frame, segments_occluded
+from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular_frame, first_hits
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
@@ -54,6 +54,19 @@ except (OSError, AttributeError):
 _PROBE_LENGTHS = 1e3
 """How far (tolerance lengths) a probe line passes beside an arc's line at its edge: far above the tolerance a
 contact is decided within, far below the size of any feature of a sane scene."""
+
+
+@dataclass(frozen=True, eq=False)
+class Probes:
+    """The probed pieces of EV arcs (see Skeleton._probe_arcs), CSR: offsets (A+1,) int64 into the pieces, an
+    arc's pieces in increasing s (none for an arc not probed); s (K, 2) float64 and node (K, 2) int32 each
+    piece's bounds on the arc's edge and their nodes; seen (K, 2) int32 the face group each side of the
+    piece's swath sees (+1 side: the side cross(b - a, apex - a) points to, then -1 side; -1 none)."""
+
+    offsets: np.ndarray
+    s: np.ndarray
+    node: np.ndarray
+    seen: np.ndarray
 
 
 def _return_free_memory() -> None:
@@ -174,8 +187,7 @@ class Skeleton:
     def _finish(self) -> None:
         scene = self.scene
         # the previous graph and its indexes go before the new ones are made
-        self.nodes = self.arcs = self._vertex_arcs = self._arc_free = None
-        self._arc_cuts: dict[int, list[tuple[float, int]]] = {}
+        self.nodes = self.arcs = self._vertex_arcs = self._arc_free = self._probes = None
         self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
         nodes = _concatenated(NodeChunk, self._node_parts)
         _return_free_memory()
@@ -228,6 +240,7 @@ class Skeleton:
             topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._through_offsets,
             self._through_edges, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
         )  # fmt: skip
+        self._probes = self._probe_arcs()
 
     # ------------------------------------------------------------------------------------------------------
     # statistics
@@ -254,7 +267,7 @@ class Skeleton:
     def nbytes(self) -> int:
         """Bytes held by nodes, arcs, the indexes and, while partial, every node's line and the incidences."""
         arrays = [*vars(self.nodes).values(), *vars(self.arcs).values()]
-        arrays += [self._vertex_arcs, self._vertex_offsets, self._arc_free]
+        arrays += [self._vertex_arcs, self._vertex_offsets, self._arc_free, *vars(self._probes).values()]
         arrays += [self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs]
         if self.node_line is not None:
             arrays += [self.node_line, *vars(self._incidence_parts[0]).values()]
@@ -443,13 +456,19 @@ class Skeleton:
         bounds_source = self._edge_touches_group(edges, group)
         # lines lying in a face's plane end where rounding puts them (END_PLANAR), lines said to leave the scene
         # may end exactly on an edge (the concave edge of a room, where rounding finds neither wall), and an arc
-        # with nodes inside it changes what its lines meet there (see _cuts): the sides of those are probed,
-        # piece by piece
+        # with nodes inside it changes what its lines meet there (see _arc_cuts): those are read piece by piece
+        # from their probes (see _probe_arcs)
+        probes = self._probes
+        first, last = probes.offsets[candidates], probes.offsets[candidates + 1]
+        probed = (last - first > 1) | ((last > first) & ~bounds_source)
+        # only the probed arcs with a piece seeing the source on one side bound its view
+        counts = (last - first)[probed]
+        pieces = np.arange(counts.sum()) + np.repeat(first[probed] - np.cumsum(counts) + counts, counts)
+        seen = probes.seen[pieces] == group
+        bounding = np.zeros(len(candidates), dtype=bool)
+        bounding[np.repeat(np.flatnonzero(probed), counts)[seen[:, 0] != seen[:, 1]]] = True
+        related = ((ends_on_source | bounds_source) & ~probed) | bounding
         dangling = (arcs.node[candidates] < 0).any(axis=1)
-        probed = np.isin(arcs.ends[candidates, :, 1], (END_PLANAR, END_FREE)).any(axis=1) & ~bounds_source
-        cut = [not open_end and bool(self._cuts(int(arc))) for arc, open_end in zip(candidates, dangling, strict=True)]
-        probed |= np.array(cut, dtype=bool)
-        related = ends_on_source | bounds_source | probed
         segments = []
         # arcs along collinear edges overlapping (the top edges of two boxes side by side) are the same lines
         # where the edges overlap: one swath between the same two nodes, traced once
@@ -461,14 +480,12 @@ class Skeleton:
             if not self._arc_free[arc]:
                 continue
             if by_probe:
-                if open_end:
-                    continue
-                bounds = [(float(arcs.s[arc, 0]), int(arcs.node[arc, 0])), *self._cuts(int(arc))]
-                bounds.append((float(arcs.s[arc, 1]), int(arcs.node[arc, 1])))
-                pieces = [
-                    (s0, s1, n0, n1, self._probed_side(vertex, int(edge), 0.5 * (s0 + s1), group))
-                    for (s0, n0), (s1, n1) in zip(bounds[:-1], bounds[1:], strict=True)
-                ]
+                seen = probes.seen[probes.offsets[arc] : probes.offsets[arc + 1]] == group
+                sides = np.where(seen[:, 0] == seen[:, 1], 0, np.where(seen[:, 0], 1, -1))
+                pieces = zip(
+                    *probes.s[probes.offsets[arc] : probes.offsets[arc + 1]].T,
+                    *probes.node[probes.offsets[arc] : probes.offsets[arc + 1]].T, sides, strict=True,
+                )
             else:
                 side = _seen_side(
                     scene, topo, self._faces_along(int(edge), float(arcs.s[arc].mean())), int(edge), group, apex,
@@ -494,93 +511,61 @@ class Skeleton:
                     segments.append((n1, n0, p1, p0))
         return _chain(segments, vertex, source)
 
-    def _cuts(self, arc: int) -> list[tuple[float, int]]:
-        """(s, node) in increasing s: the nodes through the vertex of EV arc `arc` whose line lies on its swath
-        strictly inside its range. Empty in a generic scene; in a degenerate one a corner of another object
-        lying in the plane the lines slide in (a box overhanging the one the vertex is on) changes what the
-        lines meet there without ending the arc. Cached: they depend on the graph only."""
-        if arc in self._arc_cuts:
-            return self._arc_cuts[arc]
-        scene, arcs = self.scene, self.arcs
-        vertex = int(arcs.codes[arc, 0])
-        edge = int(arcs.codes[arc, 1]) - scene.n_vertices
-        s = arcs.s[arc]
-        nodes = np.unique(arcs.node[self._vertex_arcs[self._vertex_offsets[vertex] : self._vertex_offsets[vertex + 1]]])
-        nodes = nodes[(nodes >= 0) & (nodes != arcs.node[arc, 0]) & (nodes != arcs.node[arc, 1])]
+    def _probe_arcs(self) -> Probes:
+        """The probes of the EV arcs whose sides the faces along them do not tell: lines lying in a face's
+        plane (END_PLANAR), lines said to leave the scene (END_FREE: in a closed scene they end exactly on an
+        edge), arcs with nodes inside them (_arc_cuts). Each such arc is cut at those nodes into pieces; the
+        middle line of each piece, moved off the swath to either side by _PROBE_LENGTHS tolerance lengths at
+        its edge, is cast from the vertex: the face group it meets first (-1: none, or it leaves the vertex into
+        a solid, see _leaves_freely) is what that side of the piece sees."""
+        scene, arcs, topo = self.scene, self.arcs, self.topology
+        nv = scene.n_vertices
+        cut_offsets, cut_s, cut_node = _arc_cuts(
+            arcs.kind, arcs.codes, arcs.s, arcs.node, nv, scene.vertices, scene.edges, self.nodes.start,
+            self.nodes.direction, self._vertex_offsets, self._vertex_arcs, scene.tol.snap, scene.tol.cosine,
+        )  # fmt: skip
+        cuts = np.diff(cut_offsets)
+        ends = np.isin(arcs.ends[:, :, 1], (END_PLANAR, END_FREE)).any(axis=1)
+        wanted = (arcs.kind == ARC_EV) & ~arcs.dangling & (ends | (cuts > 0))
+        counts = np.where(wanted, cuts + 1, 0)
+        offsets = np.zeros(len(arcs) + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum(counts)
+        arc = np.repeat(np.arange(len(arcs)), counts)
+        # each piece runs from the arc's start or a cut to the next cut or the arc's end
+        within = np.arange(offsets[-1]) - offsets[arc]
+        bound_s = np.concatenate([cut_s, [np.nan]])
+        bound_node = np.concatenate([cut_node, [-1]])
+        before = np.where(within > 0, cut_offsets[arc] + within - 1, len(cut_s))
+        after = np.where(within < counts[arc] - 1, cut_offsets[arc] + within, len(cut_s))
+        start_s = np.where(within > 0, bound_s[before], arcs.s[arc, 0])
+        start_node = np.where(within > 0, bound_node[before], arcs.node[arc, 0])
+        end_s = np.where(within < counts[arc] - 1, bound_s[after], arcs.s[arc, 1])
+        end_node = np.where(within < counts[arc] - 1, bound_node[after], arcs.node[arc, 1])
+        vertex = arcs.codes[arc, 0].astype(np.int64)
         apex = scene.vertices[vertex]
-        a, b = scene.vertices[scene.edges[edge]]
-        along = b - a
-        directions = self.nodes.direction[nodes]
-        off_line = np.linalg.norm(np.cross(apex - self.nodes.start[nodes], directions), axis=1)
-        across = np.cross(along, directions)
-        scale = np.einsum("ij,ij->i", across, across)
-        through = (off_line <= scene.tol.snap) & (scale > scene.tol.cosine * (along @ along))
-        nodes, directions, across, scale = nodes[through], directions[through], across[through], scale[through]
-        at = -np.einsum("ij,ij->i", np.cross(a - apex, directions), across) / scale
-        miss = np.linalg.norm(np.cross(a + at[:, None] * along - apex, directions), axis=1)
-        length = np.linalg.norm(along)
-        inside = miss <= scene.tol.snap
-        inside &= ((at - s[0]) * length > scene.tol.snap) & ((s[1] - at) * length > scene.tol.snap)
-        order = np.argsort(at[inside])
-        cuts = list(zip(at[inside][order].tolist(), nodes[inside][order].tolist(), strict=True))
-        self._arc_cuts[arc] = cuts
-        return cuts
-
-    def _probed_side(self, vertex: int, edge: int, s: float, group: int) -> int:
-        """Which side of the swath (vertex, edge) (as in _seen_side) sees face group `group` at parameter s of
-        the edge, found by casting the line there moved off the swath to either side by _PROBE_LENGTHS
-        tolerance lengths at the edge: for arcs whose lines lie in a face's plane, where the faces along them
-        close around the lines on one side only (a box's side face pressed against another's, seen along their
-        contact plane). 0 when both sides or neither see it."""
-        scene = self.scene
-        apex = scene.vertices[vertex]
-        a, b = scene.vertices[scene.edges[edge]]
-        point = a + s * (b - a)
+        a = scene.vertices[scene.edges[arcs.codes[arc, 1] - nv, 0]]
+        b = scene.vertices[scene.edges[arcs.codes[arc, 1] - nv, 1]]
+        point = a + 0.5 * (start_s + end_s)[:, None] * (b - a)
         swath = np.cross(b - a, apex - a)
-        shift = _PROBE_LENGTHS * scene.tol.length * swath / np.linalg.norm(swath)
-        seen = []
-        for side in (1, -1):
-            direction = point + side * shift - apex
-            end = self._group_hit(apex, direction, group)
-            seen.append(
-                end is not None
-                and self._leaves_freely(vertex, direction)
-                and not segments_occluded(scene, self.bvh, apex[None], end[None])[0]
-            )
-        return 0 if seen[0] == seen[1] else (1 if seen[0] else -1)
-
-    def _leaves_freely(self, vertex: int, direction: np.ndarray) -> bool:
-        """Whether the line leaving scene vertex `vertex` along `direction` (3,) goes into free space (see
-        _leaves_freely): a segment starting there into a solid crosses no surface on its way."""
-        scene, topo = self.scene, self.topology
-        return bool(_leaves_freely(
-            vertex, direction, scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
-            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._through_offsets,
-            self._through_edges, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
-        ))  # fmt: skip
-
-    def _group_hit(self, origin: np.ndarray, direction: np.ndarray, group: int) -> np.ndarray | None:
-        """(3,) where the ray origin + t direction, t > 0, meets a polygon of face group `group` inside it (by
-        more than the tolerance length from its sides) and from its front if one-sided, or None."""
-        scene = self.scene
-        for polygon in self.topology.polygons_of_group(group):
-            normal = scene.normals[polygon]
-            rate = normal @ direction
-            if abs(rate) <= scene.tol.cosine * np.linalg.norm(direction):
-                continue
-            # a one-sided face reached from behind is reached through its own solid
-            if rate > 0.0 and not scene.two_sided[polygon]:
-                continue
-            t = -(normal @ origin + scene.plane_offsets[polygon]) / rate
-            if t <= 0.0:
-                continue
-            hit = origin + t * direction
-            corners = scene.polygon(int(polygon))
-            inward = np.cross(normal, np.roll(corners, -1, axis=0) - corners)
-            inward /= np.linalg.norm(inward, axis=1)[:, None]
-            if (np.einsum("kj,kj->k", hit - corners, inward) > scene.tol.length).all():
-                return hit
-        return None
+        shift = _PROBE_LENGTHS * scene.tol.length * swath / np.linalg.norm(swath, axis=1)[:, None]
+        seen = np.full((len(arc), 2), -1, dtype=np.int32)
+        for column, side in enumerate((1.0, -1.0)):
+            if len(arc) == 0:
+                break
+            directions = point + side * shift - apex
+            free = _lines_leave_freely(
+                vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
+                topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
+                self._rest_faces, self._through_offsets, self._through_edges, scene.edge_face_offsets,
+                scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
+            )  # fmt: skip
+            polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
+            hit = free & (polygon >= 0)
+            seen[hit, column] = topo.face_group[polygon[hit]]
+        return Probes(
+            offsets, np.stack([start_s, end_s], axis=1), np.stack([start_node, end_node], axis=1).astype(np.int32),
+            seen,
+        )
 
     def _faces_along(self, edge: int, s: float) -> list[tuple[int, int]]:
         """(face, its edge) pairs around the point at parameter s of `edge`: the edge's own faces, and those of
@@ -1082,6 +1067,97 @@ def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, po
             vf_corner, rest_off, rest_face, through_off, through_edge, ef_off, ef_face, ef_local, cosine,
         )  # fmt: skip
     return result
+
+
+@njit(cache=True)
+def _lines_leave_freely(vertex, directions, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off,
+                        rest_face, through_off, through_edge, ef_off, ef_face, ef_local, cosine):
+    """(N,) bool: _leaves_freely for each line leaving vertex[i] (N,) int64 along directions[i] (N, 3)."""
+    result = np.empty(vertex.shape[0], dtype=np.bool_)
+    for i in range(vertex.shape[0]):
+        result[i] = _leaves_freely(
+            vertex[i], directions[i], points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
+            through_off, through_edge, ef_off, ef_face, ef_local, cosine,
+        )  # fmt: skip
+    return result
+
+
+@njit(cache=True)
+def _arc_cuts(kind, codes, s, node, n_vertices, vertices, edges, node_start, node_direction, vertex_offsets,
+              vertex_arcs, tol, cosine):
+    """The nodes lying inside each EV arc, CSR: offsets (A+1,) int64, then s (C,) float64 increasing within an
+    arc and node (C,) int32: the nodes at the ends of the vertex's arcs whose line (node_start, unit
+    node_direction (N, 3)) passes through the vertex (within tol) and meets the arc's edge strictly inside
+    its range (by more than tol). None in a generic scene: there every node through the vertex on the swath
+    bounds the arc. In a degenerate one a corner of another object lying in the plane the lines slide in (a
+    box overhanging the one the vertex is on) changes what the lines meet there without ending the arc."""
+    n_arcs = kind.shape[0]
+    counts = np.zeros(n_arcs + 1, dtype=np.int64)
+    found_arc = []
+    found_s = []
+    found_node = []
+    for v in range(vertex_offsets.shape[0] - 1):
+        mine = vertex_arcs[vertex_offsets[v] : vertex_offsets[v + 1]]
+        if mine.shape[0] == 0:
+            continue
+        apex = vertices[v]
+        ends = np.unique(node[mine].ravel())
+        # the nodes whose line passes through the vertex (those at the ends of its arcs, unless merged)
+        keep = np.zeros(ends.shape[0], dtype=np.bool_)
+        for k in range(ends.shape[0]):
+            if ends[k] >= 0:
+                off = np.cross(apex - node_start[ends[k]], node_direction[ends[k]])
+                keep[k] = off @ off <= tol * tol
+        ends = ends[keep]
+        values = np.empty(ends.shape[0])
+        ids = np.empty(ends.shape[0], dtype=np.int32)
+        for arc in mine:
+            if node[arc, 0] < 0 or node[arc, 1] < 0:
+                continue
+            e = codes[arc, 1] - n_vertices
+            a = vertices[edges[e, 0]]
+            along = vertices[edges[e, 1]] - a
+            length = np.sqrt(along @ along)
+            normal = np.cross(along, a - apex)
+            height = np.sqrt(normal @ normal) / length
+            normal /= np.sqrt(normal @ normal)
+            count = 0
+            for n in ends:
+                if n == node[arc, 0] or n == node[arc, 1]:
+                    continue
+                d = node_direction[n]
+                # a line through the vertex within tol of a point of the edge leans off the swath's plane by at
+                # most 2 tol over the vertex's distance to the edge
+                if abs(normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2]) * height > 2.0 * tol:
+                    continue
+                across = np.cross(along, d)
+                scale = across @ across
+                if scale <= cosine * length * length:
+                    continue
+                at = -(np.cross(a - apex, d) @ across) / scale
+                if (at - s[arc, 0]) * length <= tol or (s[arc, 1] - at) * length <= tol:
+                    continue
+                miss = np.cross(a + at * along - apex, d)
+                if miss @ miss <= tol * tol:
+                    values[count] = at
+                    ids[count] = n
+                    count += 1
+            order = np.argsort(values[:count])
+            for k in order:
+                found_arc.append(arc)
+                found_s.append(values[k])
+                found_node.append(ids[k])
+            counts[arc + 1] = count
+    offsets = np.cumsum(counts)
+    cut_s = np.empty(offsets[-1])
+    cut_node = np.empty(offsets[-1], dtype=np.int32)
+    # found vertex by vertex: put in arc order
+    fill = offsets[:-1].copy()
+    for k in range(len(found_arc)):
+        cut_s[fill[found_arc[k]]] = found_s[k]
+        cut_node[fill[found_arc[k]]] = found_node[k]
+        fill[found_arc[k]] += 1
+    return offsets, cut_s, cut_node
 
 
 @njit(cache=True)
