@@ -100,7 +100,7 @@ class Skeleton:
             scene.vertices, scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
             scene.object_ids, self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
         )  # fmt: skip
-        self._through_offsets, self._through_edges = _edges_through(
+        self._other_offsets, self._other_codes = _elements_at(
             scene.vertices, scene.edges, scene.edge_face_offsets, scene.edge_faces, scene.object_ids,
             self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
         )  # fmt: skip
@@ -237,8 +237,8 @@ class Skeleton:
         self._arc_free = _arcs_leave_freely(
             arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
             scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
-            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._through_offsets,
-            self._through_edges, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
+            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._other_offsets,
+            self._other_codes, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
         )  # fmt: skip
         self._probes = self._probe_arcs()
 
@@ -556,7 +556,7 @@ class Skeleton:
             free = _lines_leave_freely(
                 vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
                 topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
-                self._rest_faces, self._through_offsets, self._through_edges, scene.edge_face_offsets,
+                self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
                 scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
             )  # fmt: skip
             polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
@@ -1009,17 +1009,34 @@ def _resting_on(vertices, points, offsets, normals, plane_offsets, object_ids, v
 
 
 @njit(cache=True)
-def _edges_through(vertices, edges, ef_off, ef_face, object_ids, vf_off, vf_face, tol):
-    """CSR (offsets (V+1,) int64, edges int64): for each vertex, the edges of other objects passing through it
-    (within tol of the edge's line, more than tol from its ends): a box's corner on the edge of the box beside
-    it or under it. Lines from the vertex into the solid between that edge's faces enter the other object."""
+def _elements_at(vertices, edges, ef_off, ef_face, object_ids, vf_off, vf_face, tol):
+    """CSR (offsets (V+1,) int64, element codes int64: vertex w as w, edge e as V + e): for each vertex, the
+    vertices of other objects at its point (within tol: a box in the room's corner) and the edges of other
+    objects passing through it (within tol of the edge's line, more than tol from its ends: a box's corner on
+    the edge of the box beside it or under it). Lines from the vertex into the solid around such an element
+    enter the other object."""
     n_vertices = vertices.shape[0]
-    # each edge looks at the vertices within its extent along x only
+    # each element looks at the vertices within its extent along x only
     by_x = np.argsort(vertices[:, 0])
     xs = vertices[by_x, 0]
     counts = np.zeros(n_vertices + 1, dtype=np.int64)
-    through_vertex = []
-    through_edge = []
+    at_vertex = []
+    element = []
+    for w in range(n_vertices):
+        if vf_off[w] == vf_off[w + 1]:
+            continue
+        owner = object_ids[vf_face[vf_off[w]]]
+        lo = np.searchsorted(xs, vertices[w, 0] - tol, side="left")
+        hi = np.searchsorted(xs, vertices[w, 0] + tol, side="right")
+        for k in range(lo, hi):
+            v = by_x[k]
+            if vf_off[v] == vf_off[v + 1] or object_ids[vf_face[vf_off[v]]] == owner:
+                continue
+            offset = vertices[v] - vertices[w]
+            if offset @ offset <= tol * tol:
+                at_vertex.append(v)
+                element.append(w)
+                counts[v + 1] += 1
     for e in range(edges.shape[0]):
         a = vertices[edges[e, 0]]
         b = vertices[edges[e, 1]]
@@ -1039,16 +1056,16 @@ def _edges_through(vertices, edges, ef_off, ef_face, object_ids, vf_off, vf_face
                 continue
             aside = offset - t * along
             if aside @ aside <= tol * tol:
-                through_vertex.append(v)
-                through_edge.append(e)
+                at_vertex.append(v)
+                element.append(n_vertices + e)
                 counts[v + 1] += 1
-    order = np.argsort(np.array(through_vertex, dtype=np.int64), kind="mergesort")
-    return np.cumsum(counts), np.array(through_edge, dtype=np.int64)[order]
+    order = np.argsort(np.array(at_vertex, dtype=np.int64), kind="mergesort")
+    return np.cumsum(counts), np.array(element, dtype=np.int64)[order]
 
 
 @njit(cache=True)
 def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, points, offsets, normals,
-                       vf_off, vf_face, vf_corner, rest_off, rest_face, through_off, through_edge, ef_off, ef_face,
+                       vf_off, vf_face, vf_corner, rest_off, rest_face, other_off, other_code, ef_off, ef_face,
                        ef_local, cosine):
     """(A,) bool: whether the lines of each EV arc leave its vertex towards its edge into free space, not into
     the solid the vertex bounds (interior swaths, seed 003 section 3.1; see _leaves_freely). Constant along an
@@ -1064,20 +1081,20 @@ def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, po
         a = vertices[edges[e, 0]]
         result[arc] = _leaves_freely(
             v, a + t * (vertices[edges[e, 1]] - a) - vertices[v], points, offsets, normals, vf_off, vf_face,
-            vf_corner, rest_off, rest_face, through_off, through_edge, ef_off, ef_face, ef_local, cosine,
+            vf_corner, rest_off, rest_face, other_off, other_code, ef_off, ef_face, ef_local, cosine,
         )  # fmt: skip
     return result
 
 
 @njit(cache=True)
 def _lines_leave_freely(vertex, directions, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off,
-                        rest_face, through_off, through_edge, ef_off, ef_face, ef_local, cosine):
+                        rest_face, other_off, other_code, ef_off, ef_face, ef_local, cosine):
     """(N,) bool: _leaves_freely for each line leaving vertex[i] (N,) int64 along directions[i] (N, 3)."""
     result = np.empty(vertex.shape[0], dtype=np.bool_)
     for i in range(vertex.shape[0]):
         result[i] = _leaves_freely(
             vertex[i], directions[i], points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
-            through_off, through_edge, ef_off, ef_face, ef_local, cosine,
+            other_off, other_code, ef_off, ef_face, ef_local, cosine,
         )  # fmt: skip
     return result
 
@@ -1162,12 +1179,13 @@ def _arc_cuts(kind, codes, s, node, n_vertices, vertices, edges, node_start, nod
 
 @njit(cache=True)
 def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
-                   through_off, through_edge, ef_off, ef_face, ef_local, cosine):
+                   other_off, other_code, ef_off, ef_face, ef_local, cosine):
     """Whether the line leaving vertex v along `direction` (3,) goes into free space, not into a solid. Its
     own faces decide first (see _enters); a vertex resting inside another object's face (rest_off, rest_face:
-    see _resting_on) sends the lines behind that face into its object, and one on another object's edge
-    (through_off, through_edge: see _edges_through) the lines between that edge's faces, each edge's faces
-    winding on their own."""
+    see _resting_on) sends the lines behind that face into its object, and one at another object's vertex or
+    on its edge (other_off, other_code: see _elements_at) the lines into the solid around that element, the
+    faces of each element winding on their own."""
+    n_vertices = vf_off.shape[0] - 1
     direction = direction / np.sqrt(direction @ direction)
     for i in range(rest_off[v], rest_off[v + 1]):
         if normals[rest_face[i]] @ direction < -cosine:
@@ -1176,21 +1194,23 @@ def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_c
     kinds = np.empty(64, dtype=np.int64)
     corners = np.empty(64, dtype=np.int64)
     e1, e2 = _perpendicular_frame(direction)
-    count = 0
-    for i in range(vf_off[v], min(vf_off[v + 1], vf_off[v] + 64)):
-        faces[count] = vf_face[i]
-        kinds[count] = CONTACT_VERTEX
-        corners[count] = vf_corner[i]
-        count += 1
-    if _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
-        return False
-    for j in range(through_off[v], through_off[v + 1]):
+    for j in range(other_off[v] - 1, other_off[v + 1]):
+        # first the vertex's own faces (j = other_off[v] - 1), then each other element's
+        code = v if j < other_off[v] else other_code[j]
         count = 0
-        for i in range(ef_off[through_edge[j]], min(ef_off[through_edge[j] + 1], ef_off[through_edge[j]] + 64)):
-            faces[count] = ef_face[i]
-            kinds[count] = CONTACT_EDGE
-            corners[count] = ef_local[i]
-            count += 1
+        if code < n_vertices:
+            for i in range(vf_off[code], min(vf_off[code + 1], vf_off[code] + 64)):
+                faces[count] = vf_face[i]
+                kinds[count] = CONTACT_VERTEX
+                corners[count] = vf_corner[i]
+                count += 1
+        else:
+            e = code - n_vertices
+            for i in range(ef_off[e], min(ef_off[e + 1], ef_off[e] + 64)):
+                faces[count] = ef_face[i]
+                kinds[count] = CONTACT_EDGE
+                corners[count] = ef_local[i]
+                count += 1
         if _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
             return False
     return True
