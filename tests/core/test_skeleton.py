@@ -66,6 +66,11 @@ SCENES = {
     # a box stacked flush with two sides of the box under it and overhanging it on a third: lines sliding over
     # the lower top pass under the overhang, and the upper box's corners lie in that plane
     "box overhanging": lambda: boxes_in_room([((1.0, 1.0, 0.0), (2.0, 2.0, 0.6)), ((1.5, 1.0, 0.6), (2.4, 2.0, 1.1))]),
+    # two floating boxes pressed face to face, the second one taller: the first one's corners at the contact
+    # are corners of the second or lie on its edges
+    "boxes pressed face to face": lambda: boxes_in_room(
+        [((1.0, 1.0, 0.5), (2.0, 2.0, 1.1)), ((2.0, 1.0, 0.5), (2.3, 2.0, 1.3))]
+    ),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
@@ -73,7 +78,7 @@ BOX_ROOMS = ["floating box", "box on floor", "box on wall", "box in corner"]
 
 # touching, stacked and pressed boxes (the views of their vertices run along contact planes and collinear edges)
 TOUCHING = ["box on box", "boxes stacked flush", "boxes side by side", "box pressed against a box on the wall",
-            "box overhanging", "lamp table", "furnished room 0"]  # fmt: skip
+            "box overhanging", "boxes pressed face to face", "lamp table", "furnished room 0"]  # fmt: skip
 
 
 @cache
@@ -299,7 +304,7 @@ def _strictly_inside(scene: Scene, face: int, point: np.ndarray, tol: float) -> 
 def test_vertex_form_factors_are_exact(name):
     """Every vertex query is answered and equals exact_form_factors. The views of the touching scenes run along
     contact planes: faces pressed together along collinear overlapping edges (their faces close around each
-    other's edge), corners lying on another box's edge (lines between that edge's faces enter the other box),
+    other's edge), corners at another box's corner or on its edge (lines into the solid there enter that box),
     lines sliding over a top under an overhang or over two coplanar tops, lines ending exactly on a room's
     concave edge; the construction used to leave those views open and the query refused them."""
     scene = _scene(name)
