@@ -34,7 +34,9 @@ What prunes, and why each prune is safe (validation rejects every line pruned he
   the skeleton's record of built sources). An E4 pivot is dropped before its curves are tested when none
   of its lines E(s) X(t) can pass on one side of all the edges of a source: for each source, over the whole
   (s, t) region, the Pluecker side against one edge is strictly negative and against another strictly
-  positive.
+  positive. Before any clipping, a target (or an occluder of the depth maps) is skipped when no line through
+  the source bin and a source's bounding sphere passes through the target's bounding sphere (the double
+  cones of directions from the bin's middle, both spheres grown by the bin's half length).
 
 Outer generators get no local test: validation lets a line stop on its outer generators (a line leaving a
 floor corner), so a VV pair is never culled by the faces at its vertices, only by occlusion.
@@ -168,8 +170,8 @@ def iter_candidates(
             return _vertex_candidates(
                 vertex_ids, lo, hi, vmask, emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
                 g.plane_offsets, g.edge_out, g.vf_off, g.vf_face, g.vf_corner, g.ve_off, g.ve_edge, g.ef_off,
-                g.ef_face, g.ef_inward, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.grid, CELLS,
-                vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+                g.ef_face, g.ef_inward, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.centres,
+                g.radii, g.grid, CELLS, vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
             )  # fmt: skip
         if phase == "crossing":
             return _crossing_candidates(
@@ -180,7 +182,7 @@ def iter_candidates(
             return _face_candidates(
                 polygon_ids, lo, hi, emask, g.vertices, g.edges, g.points, g.offsets, g.normals, g.plane_offsets,
                 g.edge_out, g.corner_edge, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.vf_off,
-                g.vf_face, g.ef_off, g.ef_face, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
+                g.vf_face, g.ef_off, g.ef_face, g.centres, g.radii, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
             )  # fmt: skip
         return _edge_candidates(
             edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
@@ -617,7 +619,7 @@ def _any_wanted(wanted, a, k0, k1, l0, l1, n):
 @njit(cache=True)
 def _depth_map(
     q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth,
+    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth, lazy, src, tol,
 ):  # fmt: skip
     """Depth bounds of the source segment q[0]..q[nb] cut in nb bins (a point when nb == 1 and q[0] == q[1]).
 
@@ -631,7 +633,10 @@ def _depth_map(
     (the set of lines from a point through a convex body is a convex cone, and along the bin the lines of one
     direction meeting it form an interval), so it crosses the object's surface, nearer than its farthest
     vertex facing the source. Only cells some bin wants (wanted (nb, 3 n n) bool: a lazy build's source mask)
-    are worked for: the others keep their bound (a larger bound only lets more candidates through).
+    are worked for: the others keep their bound (a larger bound only lets more candidates through). In a lazy
+    build (sources `src`) a polygon or object that no line through the source segment and a source meets is
+    skipped: covering a whole cell, it would be met by every line of the cell, so the cell holds no line
+    through a source and none of its candidates is kept anyway.
     """
     n_poly = normals.shape[0]
     tvals = np.empty((nb + 1, n + 1, n + 1))
@@ -654,6 +659,9 @@ def _depth_map(
         # a polygon too small to cover a whole cell from the source is skipped (it only makes bounds larger)
         far = _source_distance(q, nb, centres[p])
         if far > radii[p] and radii[p] * np.pi < far * 0.45 / n:
+            continue
+        if lazy and not _segment_reaches_sources(q, nb, centres[p], radii[p], src, centres, radii, normals,
+                                                 plane_offsets, tol):  # fmt: skip
             continue
         first = offsets[p]
         count = offsets[p + 1] - first
@@ -756,6 +764,9 @@ def _depth_map(
         far = _source_distance(q, nb, centre)
         if far > radius and radius * np.pi < far * 0.45 / n:
             continue
+        if lazy and not _segment_reaches_sources(q, nb, centre, radius, src, centres, radii, normals, plane_offsets,
+                                                 tol):  # fmt: skip
+            continue
         for a in range(3):
             u0 = np.inf
             u1 = -np.inf
@@ -830,7 +841,7 @@ def _vertex_maps(
         depth[:] = np.inf
         _depth_map(
             q, 1, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth, lazy, src, tol,
         )  # fmt: skip
         out[v] = depth[0]
 
@@ -912,6 +923,68 @@ def _line_meets(origin, d, src, points, offsets, normals, plane_offsets, edge_ou
     return False
 
 
+@njit(cache=True)
+def _reaches_sources(q, b, centre, radius, src, centres, radii, normals, plane_offsets, tol):
+    """Whether a line through bin b of q (nb+1, 3) and a source polygon (within tol) may pass within `radius`
+    of `centre`: False only when none can. Shifting such a line to pass through the bin's middle m moves it by
+    at most the bin's half length h, so it then meets the source's bounding sphere grown by h and the sphere
+    (centre, radius + h): the directions from m into both spheres (double cones, a line running both ways)
+    must overlap. A bin within reach of a source's plane may hold lines lying in it, which count as crossing."""
+    m0 = 0.5 * (q[b, 0] + q[b + 1, 0])
+    m1 = 0.5 * (q[b, 1] + q[b + 1, 1])
+    m2 = 0.5 * (q[b, 2] + q[b + 1, 2])
+    h0 = q[b + 1, 0] - m0
+    h1 = q[b + 1, 1] - m1
+    h2 = q[b + 1, 2] - m2
+    h = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + tol
+    w0 = centre[0] - m0
+    w1 = centre[1] - m1
+    w2 = centre[2] - m2
+    dw = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    reach = radius + h
+    if dw <= reach:
+        return True
+    target_angle = np.arcsin(reach / dw)
+    for p in src:
+        normal = normals[p]
+        if abs(normal[0] * m0 + normal[1] * m1 + normal[2] * m2 + plane_offsets[p]) <= h + tol:
+            return True
+        a0 = centres[p, 0] - m0
+        a1 = centres[p, 1] - m1
+        a2 = centres[p, 2] - m2
+        da = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        spread = radii[p] + h + tol
+        if da <= spread:
+            return True
+        apart = np.arccos(min(1.0, abs(a0 * w0 + a1 * w1 + a2 * w2) / (da * dw)))
+        if apart <= np.arcsin(spread / da) + target_angle + 1e-9:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
+    """Whether a line lying in polygon f's plane and crossing f may count as crossing a source (_line_meets):
+    it meets a source only where the source's bounding sphere reaches f's plane, and it lies in a source's
+    plane only where f comes within tol of that plane (the line passes through f, and a line in the plane
+    within tol.cosine of parallel strays from it by far less than tol across the scene; 4 tol is ample)."""
+    for p in src:
+        if abs(_dot(normals[f], centres[p]) + plane_offsets[f]) <= radii[p] + 4.0 * tol:
+            return True
+        if abs(_dot(normals[p], centres[f]) + plane_offsets[p]) <= radii[f] + 4.0 * tol:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _segment_reaches_sources(q, nb, centre, radius, src, centres, radii, normals, plane_offsets, tol):
+    """_reaches_sources for some bin of q (nb+1, 3)."""
+    for b in range(nb):
+        if _reaches_sources(q, b, centre, radius, src, centres, radii, normals, plane_offsets, tol):
+            return True
+    return False
+
+
 # ----------------------------------------------------------------------------------------------------------
 # registration of target edges in the cells of a source
 
@@ -919,12 +992,14 @@ def _line_meets(origin, d, src, points, offsets, normals, plane_offsets, edge_ou
 @njit(cache=True)
 def _register(
     q, nb, depth, use_mask, mask, ends, target_ids, n, margin, eps, keys, targets, sides, bits, count,
+    src, centres, radii, normals, plane_offsets, tol,
 ):  # fmt: skip
     """Append (key, target, side, bits) for every cell of every bin through which target edge ends[t] (2, 3)
     may be reached from the bin within the cell's depth bound. key = b * 3 n n + cell; side 0 along the
     canonical direction; bits (uint64) the sub-cells of an 8 x 8 split of the cell that the directions from
     the bin to the target reach (_sub_cells). Grows the arrays when full; returns (keys, targets, sides, bits,
-    count)."""
+    count). With use_mask (a lazy build), only the cells of `mask` are worked for, and targets that no line
+    through the bin and a source polygon `src` (within tol) meets within the margin are skipped at once."""
     quad = np.empty((4, 3))
     buf_a = np.empty((_CLIP, 3))
     buf_b = np.empty((_CLIP, 3))
@@ -935,14 +1010,22 @@ def _register(
     row_hi = np.empty(8)
     n_cells = 3 * n * n
     point_source = nb == 1 and q[0, 0] == q[1, 0] and q[0, 1] == q[1, 1] and q[0, 2] == q[1, 2]
+    middle = np.empty(3)
     for b in range(nb):
-        # the farthest any line of the bin may go: skip targets beyond every bound
+        # the farthest any line of the bin may go: skip targets beyond every bound (of the cells worked for)
         reach = 0.0
         for side in range(2):
             for cell in range(n_cells):
-                if depth[b, side, cell] > reach:
+                if depth[b, side, cell] > reach and not (use_mask and not mask[b, cell]):
                     reach = depth[b, side, cell]
         for t in range(target_ids.shape[0]):
+            if use_mask:
+                for c in range(3):
+                    middle[c] = 0.5 * (ends[t, 0, c] + ends[t, 1, c])
+                half = 0.5 * np.sqrt((ends[t, 1, 0] - ends[t, 0, 0]) ** 2 + (ends[t, 1, 1] - ends[t, 0, 1]) ** 2
+                                     + (ends[t, 1, 2] - ends[t, 0, 2]) ** 2)  # fmt: skip
+                if not _reaches_sources(q, b, middle, half + margin, src, centres, radii, normals, plane_offsets, tol):
+                    continue
             corners = 2 if point_source else 4
             for c in range(3):
                 quad[0, c] = ends[t, 0, c] - q[b, c]
@@ -1206,11 +1289,13 @@ def _meet(o0, o1, o2, d0, d1, d2, a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
-def _meets_segment(o, d, vertices, edges, normals, ef_off, ef_face, f, tol, delta):
+def _meets_segment(o, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, f, tol, delta):
     """(ok, t): whether the line o + t d (d unit) meets edge f within tol, and where along the line.
 
-    A line through an end of f (within tol / 2, and crossing the plane of each face of f that near the end)
-    meets a corner there for validation, which then finds no contact with the edge: it is refused here."""
+    A line through an end of f (within tol / 2) meets a corner there for validation, which then finds no
+    contact with the edge, when each face of f is either crossed that near the end or exactly parallel to the
+    line (d . normal == 0, an axis-aligned line along an axis-aligned face) and within tol / 2 of its plane:
+    validation sets such a face aside as one the line slides over. Such a line is refused here."""
     a = vertices[edges[f, 0]]
     b = vertices[edges[f, 1]]
     ok, t, s, gap = _meet(o[0], o[1], o[2], d[0], d[1], d[2], a[0], a[1], a[2], b[0], b[1], b[2])
@@ -1221,10 +1306,16 @@ def _meets_segment(o, d, vertices, edges, normals, ef_off, ef_face, f, tol, delt
         return False, t
     near = min(abs(s * length), abs((1.0 - s) * length))
     if near <= 0.5 * tol:
-        steep = np.inf
+        at_corner = True
         for k in range(ef_off[f], ef_off[f + 1]):
-            steep = min(steep, abs(_dot(normals[ef_face[k]], d)))
-        if steep > delta and near + gap / steep <= 0.5 * tol:
+            face = ef_face[k]
+            rate = abs(_dot(normals[face], d))
+            if rate == 0.0:
+                if abs(_dot(normals[face], o) + plane_offsets[face]) > 0.5 * tol:
+                    at_corner = False
+            elif rate <= delta or near + gap / rate > 0.5 * tol:
+                at_corner = False
+        if at_corner:
             return False, t
     return True, t
 
@@ -1262,7 +1353,8 @@ def _enters_object(is_vertex, gid, u, others, n_others, vertex_object, edge_obje
 def _vertex_candidates(
     vertex_ids, lo, hi, vmask, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out,
     vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_inward, vertex_object, edge_object,
-    object_offsets, object_polygons, grid, n, vertex_depth, lazy, src, margin, delta, eps, tol, angle_tol,
+    object_offsets, object_polygons, centres, radii, grid, n, vertex_depth, lazy, src, margin, delta, eps, tol,
+    angle_tol,
 ):  # fmt: skip
     """VV candidates (v, w > v) and VEE / EVE candidates of the vertices vertex_ids[lo:hi]."""
     out = _new_output(1024)
@@ -1357,7 +1449,8 @@ def _vertex_candidates(
         for k in range(ve_off[v], ve_off[v + 1]):
             incident[ve_edge[k]] = False
         keys, tgts, sides, bits, n_reg = _register(q, 1, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps, keys,
-                                                   tgts, sides, bits, 0)  # fmt: skip
+                                                   tgts, sides, bits, 0, src, centres, radii, normals, plane_offsets,
+                                                   tol)  # fmt: skip
         order, group_off = _group(keys, n_reg, n_cells)
         for cell in range(n_cells):
             g0 = group_off[cell]
@@ -1391,10 +1484,12 @@ def _vertex_candidates(
                         d[0] = -d[0]
                         d[1] = -d[1]
                         d[2] = -d[2]
-                    ok_f, tf = _meets_segment(p, d, vertices, edges, normals, ef_off, ef_face, f, tol, delta)
+                    ok_f, tf = _meets_segment(p, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, f, tol,
+                                                  delta)  # fmt: skip
                     if not ok_f:
                         continue
-                    ok_g, tg = _meets_segment(p, d, vertices, edges, normals, ef_off, ef_face, g, tol, delta)
+                    ok_g, tg = _meets_segment(p, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, g, tol,
+                                                  delta)  # fmt: skip
                     if not ok_g:
                         continue
                     side_f = 0 if tf > 0.0 else 1
@@ -1703,7 +1798,7 @@ def _edge_candidates(
         depth = np.full((nb, 2, n_cells), np.inf)
         _depth_map(
             q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, mask, depth,
+            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, mask, depth, lazy, src, tol,
         )  # fmt: skip
         m = 0
         for f in edge_ids:
@@ -1722,7 +1817,8 @@ def _edge_candidates(
             slots[m] = m
             m += 1
         keys, tgts, sides, bits, n_reg = _register(q, nb, depth, lazy, mask, ends[:m], slots[:m], n, margin, eps,
-                                                   keys, tgts, sides, bits, 0)  # fmt: skip
+                                                   keys, tgts, sides, bits, 0, src, centres, radii, normals,
+                                                   plane_offsets, tol)  # fmt: skip
         order, group_off = _group(keys, n_reg, nb * n_cells)
         len_e = _norm(ed)
         for key in range(nb * n_cells):
@@ -1848,8 +1944,8 @@ def _edge_candidates(
                             reg[2] = rz
                             ok = True
                             for k in range(3):
-                                hit, tk = _meets_segment(start, d, vertices, edges, normals, ef_off, ef_face, gen[k],
-                                                         tol, delta)  # fmt: skip
+                                hit, tk = _meets_segment(start, d, vertices, edges, normals, plane_offsets, ef_off,
+                                                         ef_face, gen[k], tol, delta)  # fmt: skip
                                 side = 0 if tk > 0.0 else 1
                                 if not hit or side != sides[reg[k]] or abs(tk) > depth[b, side, cell] + margin:
                                     ok = False
@@ -1913,7 +2009,7 @@ def _edge_candidates(
 @njit(cache=True, nogil=True)
 def _face_candidates(
     polygon_ids, lo, hi, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, corner_edge,
-    vertex_object, edge_object, object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face,
+    vertex_object, edge_object, object_offsets, object_polygons, vf_off, vf_face, ef_off, ef_face, centres, radii,
     lazy, src, margin, delta, tol, angle_tol,
 ):  # fmt: skip
     """Lines lying in the plane of polygons polygon_ids[lo:hi] through the points where two masked edges cross
@@ -1933,6 +2029,8 @@ def _face_candidates(
     u = np.empty(3)
     for index in range(lo, hi):
         f = polygon_ids[index]
+        if lazy and not _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
+            continue
         normal = normals[f]
         first = offsets[f]
         corners = offsets[f + 1] - first

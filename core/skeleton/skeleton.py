@@ -16,7 +16,7 @@ from __future__ import annotations
 import ctypes
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numba import njit
@@ -24,7 +24,7 @@ from numba import njit
 from ..bvh import build_bvh
 from ..errors import CancelledError, SceneError, VisradError
 from ..formfactor import clip_to_hemisphere, lambert_sum
-from ..raycast import CONTACT_VERTEX, _contact_arc, _perpendicular_frame
+from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular_frame, first_hits
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
@@ -33,6 +33,8 @@ from .topology import scene_topology
 from .validation import (
     ARC_EV,
     ARC_NAMES,
+    END_FREE,
+    END_PLANAR,
     NODE_NAMES,
     REJECT_NAMES,
     IncidenceChunk,
@@ -47,6 +49,24 @@ try:
     _malloc_trim = ctypes.CDLL("libc.so.6").malloc_trim
 except (OSError, AttributeError):
     _malloc_trim = None
+
+
+_PROBE_LENGTHS = 1e3
+"""How far (tolerance lengths) a probe line passes beside an arc's line at its edge: far above the tolerance a
+contact is decided within, far below the size of any feature of a sane scene."""
+
+
+@dataclass(frozen=True, eq=False)
+class Probes:
+    """The probed pieces of EV arcs (see Skeleton._probe_arcs), CSR: offsets (A+1,) int64 into the pieces, an
+    arc's pieces in increasing s (none for an arc not probed); s (K, 2) float64 and node (K, 2) int32 each
+    piece's bounds on the arc's edge and their nodes; seen (K, 2) int32 the face group each side of the
+    piece's swath sees (+1 side: the side cross(b - a, apex - a) points to, then -1 side; -1 none)."""
+
+    offsets: np.ndarray
+    s: np.ndarray
+    node: np.ndarray
+    seen: np.ndarray
 
 
 def _return_free_memory() -> None:
@@ -80,6 +100,11 @@ class Skeleton:
             scene.vertices, scene.polygon_points, scene.polygon_offsets, scene.normals, scene.plane_offsets,
             scene.object_ids, self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
         )  # fmt: skip
+        self._other_offsets, self._other_codes = _elements_at(
+            scene.vertices, scene.edges, scene.edge_face_offsets, scene.edge_faces, scene.object_ids,
+            self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
+        )  # fmt: skip
+        self._collinear_offsets, self._collinear_edges = _collinear_edges(scene)
         self.sources: np.ndarray | None = np.empty(0, dtype=np.int64)
         self._node_parts: list[NodeChunk] = []
         self._incidence_parts: list[IncidenceChunk] = []
@@ -162,7 +187,7 @@ class Skeleton:
     def _finish(self) -> None:
         scene = self.scene
         # the previous graph and its indexes go before the new ones are made
-        self.nodes = self.arcs = self._vertex_arcs = self._arc_free = None
+        self.nodes = self.arcs = self._vertex_arcs = self._arc_free = self._probes = None
         self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
         nodes = _concatenated(NodeChunk, self._node_parts)
         _return_free_memory()
@@ -212,8 +237,10 @@ class Skeleton:
         self._arc_free = _arcs_leave_freely(
             arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
             scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
-            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, scene.tol.cosine,
+            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._other_offsets,
+            self._other_codes, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
         )  # fmt: skip
+        self._probes = self._probe_arcs()
 
     # ------------------------------------------------------------------------------------------------------
     # statistics
@@ -240,7 +267,7 @@ class Skeleton:
     def nbytes(self) -> int:
         """Bytes held by nodes, arcs, the indexes and, while partial, every node's line and the incidences."""
         arrays = [*vars(self.nodes).values(), *vars(self.arcs).values()]
-        arrays += [self._vertex_arcs, self._vertex_offsets, self._arc_free]
+        arrays += [self._vertex_arcs, self._vertex_offsets, self._arc_free, *vars(self._probes).values()]
         arrays += [self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs]
         if self.node_line is not None:
             arrays += [self.node_line, *vars(self._incidence_parts[0]).values()]
@@ -426,29 +453,139 @@ class Skeleton:
         # an arc whose lines end exactly on the edge between the source and another face (its two nodes found
         # either) ends on the source
         ends_on_source = (arcs.ends[candidates, :, 1] == group).any(axis=1)
-        related = ends_on_source | self._edge_touches_group(edges, group)
+        bounds_source = self._edge_touches_group(edges, group)
+        # lines lying in a face's plane end where rounding puts them (END_PLANAR), lines said to leave the scene
+        # may end exactly on an edge (the concave edge of a room, where rounding finds neither wall), and an arc
+        # with nodes inside it changes what its lines meet there (see _arc_cuts): those are read piece by piece
+        # from their probes (see _probe_arcs)
+        probes = self._probes
+        first, last = probes.offsets[candidates], probes.offsets[candidates + 1]
+        probed = (last - first > 1) | ((last > first) & ~bounds_source)
+        # only the probed arcs with a piece seeing the source on one side bound its view
+        counts = (last - first)[probed]
+        pieces = np.arange(counts.sum()) + np.repeat(first[probed] - np.cumsum(counts) + counts, counts)
+        seen = probes.seen[pieces] == group
+        bounding = np.zeros(len(candidates), dtype=bool)
+        bounding[np.repeat(np.flatnonzero(probed), counts)[seen[:, 0] != seen[:, 1]]] = True
+        related = ((ends_on_source | bounds_source) & ~probed) | bounding
+        dangling = (arcs.node[candidates] < 0).any(axis=1)
         segments = []
-        for arc, edge, on_source in zip(candidates[related], edges[related], ends_on_source[related], strict=True):
-            side = _seen_side(scene, topo, int(edge), group, apex, group if on_source else int(arcs.end[arc, 1]))
-            if side == 0:
-                continue
-            if (arcs.node[arc] < 0).any():
-                raise VisradError(
-                    f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
-                    f"{edge} lacks a node (build the skeleton completely or report the scene)"
-                )
+        # arcs along collinear edges overlapping (the top edges of two boxes side by side) are the same lines
+        # where the edges overlap: one swath between the same two nodes, traced once
+        traced = set()
+        for arc, edge, on_source, by_probe, open_end in zip(
+            candidates[related], edges[related], ends_on_source[related], probed[related], dangling[related],
+            strict=True,
+        ):
             if not self._arc_free[arc]:
                 continue
-            s0, s1 = arcs.s[arc]
-            n0, n1 = arcs.node[arc]
-            a, b = scene.vertices[scene.edges[edge]]
-            p0 = _onto_plane(apex, a + s0 * (b - a), normal, offset)
-            p1 = _onto_plane(apex, a + s1 * (b - a), normal, offset)
-            if _seen_on_left(apex, a, b, 0.5 * (s0 + s1), normal, offset, side):
-                segments.append((n0, n1, p0, p1))
+            if by_probe:
+                seen = probes.seen[probes.offsets[arc] : probes.offsets[arc + 1]] == group
+                sides = np.where(seen[:, 0] == seen[:, 1], 0, np.where(seen[:, 0], 1, -1))
+                pieces = zip(
+                    *probes.s[probes.offsets[arc] : probes.offsets[arc + 1]].T,
+                    *probes.node[probes.offsets[arc] : probes.offsets[arc + 1]].T, sides, strict=True,
+                )
             else:
-                segments.append((n1, n0, p1, p0))
+                side = _seen_side(
+                    scene, topo, self._faces_along(int(edge), float(arcs.s[arc].mean())), int(edge), group, apex,
+                    group if on_source else int(arcs.end[arc, 1]),
+                )
+                if side != 0 and open_end:
+                    raise VisradError(
+                        f"the view of polygon {source} from vertex {vertex} is not closed: an arc along edge "
+                        f"{edge} lacks a node (build the skeleton completely or report the scene)"
+                    )
+                pieces = [(*arcs.s[arc], *arcs.node[arc], side)]
+            a, b = scene.vertices[scene.edges[edge]]
+            for s0, s1, n0, n1, side in pieces:
+                n0, n1 = int(n0), int(n1)
+                if side == 0 or (min(n0, n1), max(n0, n1)) in traced:
+                    continue
+                traced.add((min(n0, n1), max(n0, n1)))
+                p0 = _onto_plane(apex, a + s0 * (b - a), normal, offset)
+                p1 = _onto_plane(apex, a + s1 * (b - a), normal, offset)
+                if _seen_on_left(apex, a, b, 0.5 * (s0 + s1), normal, offset, side):
+                    segments.append((n0, n1, p0, p1))
+                else:
+                    segments.append((n1, n0, p1, p0))
         return _chain(segments, vertex, source)
+
+    def _probe_arcs(self) -> Probes:
+        """The probes of the EV arcs whose sides the faces along them do not tell: lines lying in a face's
+        plane (END_PLANAR), lines said to leave the scene (END_FREE: in a closed scene they end exactly on an
+        edge), arcs with nodes inside them (_arc_cuts). Each such arc is cut at those nodes into pieces; the
+        middle line of each piece, moved off the swath to either side by _PROBE_LENGTHS tolerance lengths at
+        its edge, is cast from the vertex: the face group it meets first (-1: none, or it leaves the vertex into
+        a solid, see _leaves_freely) is what that side of the piece sees."""
+        scene, arcs, topo = self.scene, self.arcs, self.topology
+        nv = scene.n_vertices
+        cut_offsets, cut_s, cut_node = _arc_cuts(
+            arcs.kind, arcs.codes, arcs.s, arcs.node, nv, scene.vertices, scene.edges, self.nodes.start,
+            self.nodes.direction, self._vertex_offsets, self._vertex_arcs, scene.tol.snap, scene.tol.cosine,
+        )  # fmt: skip
+        cuts = np.diff(cut_offsets)
+        ends = np.isin(arcs.ends[:, :, 1], (END_PLANAR, END_FREE)).any(axis=1)
+        wanted = (arcs.kind == ARC_EV) & ~arcs.dangling & (ends | (cuts > 0))
+        counts = np.where(wanted, cuts + 1, 0)
+        offsets = np.zeros(len(arcs) + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum(counts)
+        arc = np.repeat(np.arange(len(arcs)), counts)
+        # each piece runs from the arc's start or a cut to the next cut or the arc's end
+        within = np.arange(offsets[-1]) - offsets[arc]
+        bound_s = np.concatenate([cut_s, [np.nan]])
+        bound_node = np.concatenate([cut_node, [-1]])
+        before = np.where(within > 0, cut_offsets[arc] + within - 1, len(cut_s))
+        after = np.where(within < counts[arc] - 1, cut_offsets[arc] + within, len(cut_s))
+        start_s = np.where(within > 0, bound_s[before], arcs.s[arc, 0])
+        start_node = np.where(within > 0, bound_node[before], arcs.node[arc, 0])
+        end_s = np.where(within < counts[arc] - 1, bound_s[after], arcs.s[arc, 1])
+        end_node = np.where(within < counts[arc] - 1, bound_node[after], arcs.node[arc, 1])
+        vertex = arcs.codes[arc, 0].astype(np.int64)
+        apex = scene.vertices[vertex]
+        a = scene.vertices[scene.edges[arcs.codes[arc, 1] - nv, 0]]
+        b = scene.vertices[scene.edges[arcs.codes[arc, 1] - nv, 1]]
+        point = a + 0.5 * (start_s + end_s)[:, None] * (b - a)
+        swath = np.cross(b - a, apex - a)
+        shift = _PROBE_LENGTHS * scene.tol.length * swath / np.linalg.norm(swath, axis=1)[:, None]
+        seen = np.full((len(arc), 2), -1, dtype=np.int32)
+        for column, side in enumerate((1.0, -1.0)):
+            if len(arc) == 0:
+                break
+            directions = point + side * shift - apex
+            free = _lines_leave_freely(
+                vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
+                topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
+                self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
+                scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
+            )  # fmt: skip
+            polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
+            hit = free & (polygon >= 0)
+            seen[hit, column] = topo.face_group[polygon[hit]]
+        return Probes(
+            offsets, np.stack([start_s, end_s], axis=1), np.stack([start_node, end_node], axis=1).astype(np.int32),
+            seen,
+        )
+
+    def _faces_along(self, edge: int, s: float) -> list[tuple[int, int]]:
+        """(face, its edge) pairs around the point at parameter s of `edge`: the edge's own faces, and those of
+        other edges on the same line that hold the point (two boxes side by side: the top edges at their
+        contact overlap, and each box's faces there close around the other's edge as well)."""
+        scene = self.scene
+        faces = [(int(face), edge) for face in scene.edge_polygons(edge)]
+        others = self._collinear_edges[self._collinear_offsets[edge] : self._collinear_offsets[edge + 1]]
+        if len(others) == 0:
+            return faces
+        a, b = scene.vertices[scene.edges[edge]]
+        point = a + s * (b - a)
+        for other in others:
+            p, q = scene.vertices[scene.edges[other]]
+            along = q - p
+            length = np.linalg.norm(along)
+            t = (point - p) @ along / length
+            if scene.tol.length < t < length - scene.tol.length:
+                faces.extend((int(face), int(other)) for face in scene.edge_polygons(int(other)))
+        return faces
 
     def _edge_touches_group(self, edges: np.ndarray, group: int) -> np.ndarray:
         """(K,) bool: which of the edges (K,) int64 bound a polygon of face group `group`."""
@@ -756,9 +893,11 @@ def _inward(scene: Scene, face: int, edge: int) -> np.ndarray:
     return np.cross(scene.normals[face], along)
 
 
-def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: int) -> int:
+def _seen_side(scene: Scene, topology, faces: list[tuple[int, int]], edge: int, group: int, apex,
+               end_after: int) -> int:
     """Which side of the swath (apex, edge) sees the source's face group: +1 the side its normal
     cross(b - a, apex - a) points to, -1 the other, 0 when the swath bounds nothing of the source's view.
+    faces: the (face, its edge) pairs around the swath's points of the edge (Skeleton._faces_along).
 
     An edge of the source bounds its view where the lines just inside the source pass the edge's other faces:
     in the section across the edge, a face pointing between the apex and the source hides it, and so does a
@@ -770,14 +909,15 @@ def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: i
     along = b - a
     to_apex = apex - a
     swath = np.cross(along, to_apex)
-    faces = scene.edge_faces[scene.edge_face_offsets[edge] : scene.edge_face_offsets[edge + 1]]
-    own = faces[topology.face_group[faces] == group]
+    own = [(face, at) for face, at in faces if topology.face_group[face] == group]
     tol = scene.tol.length
-    if len(own):
-        into_source = _inward(scene, int(own[0]), edge)
+    if own:
+        into_source = _inward(scene, *own[0])
         turn = np.sign(np.cross(to_apex, into_source) @ along)
-        for face in faces[topology.face_group[faces] != group]:
-            into_face = _inward(scene, int(face), edge)
+        for face, at in faces:
+            if topology.face_group[face] == group:
+                continue
+            into_face = _inward(scene, face, at)
             if abs(scene.normals[face] @ to_apex) <= tol:
                 # the apex lies on this face's plane: the lines just inside the source leave it across the
                 # face, into the solid when the source is behind the face (a convex edge of a solid)
@@ -792,10 +932,10 @@ def _seen_side(scene: Scene, topology, edge: int, group: int, apex, end_after: i
         return 0
     best = 0.0
     side = 0
-    for face in faces:
+    for face, at in faces:
         if abs(scene.normals[face] @ to_apex) <= tol:
             continue
-        lean = swath @ _inward(scene, int(face), edge)
+        lean = swath @ _inward(scene, face, at)
         if abs(lean) > best:
             best = abs(lean)
             side = -int(np.sign(lean))
@@ -869,20 +1009,69 @@ def _resting_on(vertices, points, offsets, normals, plane_offsets, object_ids, v
 
 
 @njit(cache=True)
+def _elements_at(vertices, edges, ef_off, ef_face, object_ids, vf_off, vf_face, tol):
+    """CSR (offsets (V+1,) int64, element codes int64: vertex w as w, edge e as V + e): for each vertex, the
+    vertices of other objects at its point (within tol: a box in the room's corner) and the edges of other
+    objects passing through it (within tol of the edge's line, more than tol from its ends: a box's corner on
+    the edge of the box beside it or under it). Lines from the vertex into the solid around such an element
+    enter the other object."""
+    n_vertices = vertices.shape[0]
+    # each element looks at the vertices within its extent along x only
+    by_x = np.argsort(vertices[:, 0])
+    xs = vertices[by_x, 0]
+    counts = np.zeros(n_vertices + 1, dtype=np.int64)
+    at_vertex = []
+    element = []
+    for w in range(n_vertices):
+        if vf_off[w] == vf_off[w + 1]:
+            continue
+        owner = object_ids[vf_face[vf_off[w]]]
+        lo = np.searchsorted(xs, vertices[w, 0] - tol, side="left")
+        hi = np.searchsorted(xs, vertices[w, 0] + tol, side="right")
+        for k in range(lo, hi):
+            v = by_x[k]
+            if vf_off[v] == vf_off[v + 1] or object_ids[vf_face[vf_off[v]]] == owner:
+                continue
+            offset = vertices[v] - vertices[w]
+            if offset @ offset <= tol * tol:
+                at_vertex.append(v)
+                element.append(w)
+                counts[v + 1] += 1
+    for e in range(edges.shape[0]):
+        a = vertices[edges[e, 0]]
+        b = vertices[edges[e, 1]]
+        along = b - a
+        length = np.sqrt(along @ along)
+        along = along / length
+        owner = object_ids[ef_face[ef_off[e]]]
+        lo = np.searchsorted(xs, min(a[0], b[0]) - tol, side="left")
+        hi = np.searchsorted(xs, max(a[0], b[0]) + tol, side="right")
+        for k in range(lo, hi):
+            v = by_x[k]
+            if vf_off[v] == vf_off[v + 1] or object_ids[vf_face[vf_off[v]]] == owner:
+                continue
+            offset = vertices[v] - a
+            t = offset @ along
+            if t <= tol or t >= length - tol:
+                continue
+            aside = offset - t * along
+            if aside @ aside <= tol * tol:
+                at_vertex.append(v)
+                element.append(n_vertices + e)
+                counts[v + 1] += 1
+    order = np.argsort(np.array(at_vertex, dtype=np.int64), kind="mergesort")
+    return np.cumsum(counts), np.array(element, dtype=np.int64)[order]
+
+
+@njit(cache=True)
 def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, points, offsets, normals,
-                       vf_off, vf_face, vf_corner, rest_off, rest_face, cosine):
+                       vf_off, vf_face, vf_corner, rest_off, rest_face, other_off, other_code, ef_off, ef_face,
+                       ef_local, cosine):
     """(A,) bool: whether the lines of each EV arc leave its vertex towards its edge into free space, not into
-    the solid the vertex bounds (interior swaths, seed 003 section 3.1). Projected along the line, the faces
-    around the vertex are sectors; counted with the sign of normal . direction, they wind -1 around every
-    direction exactly when the line enters the solid there. Constant along an arc: the winding changes only
-    where the line slides over a face of the vertex, which ends the arc at a node. A vertex resting inside
-    another object's face (rest_off, rest_face: see _resting_on) sends the lines behind that face into its
-    object: those are not free either."""
+    the solid the vertex bounds (interior swaths, seed 003 section 3.1; see _leaves_freely). Constant along an
+    arc: the winding changes only where the line slides over a face of the vertex, which ends the arc at a
+    node."""
     result = np.ones(kind.shape[0], dtype=np.bool_)
-    starts = np.empty(64)
-    lengths = np.empty(64)
-    signs = np.empty(64)
-    bounds = np.empty(128)
     for arc in range(kind.shape[0]):
         if kind[arc] != ARC_EV or dangling[arc]:
             continue
@@ -890,47 +1079,205 @@ def _arcs_leave_freely(kind, codes, s, dangling, n_vertices, vertices, edges, po
         e = codes[arc, 1] - n_vertices
         t = 0.5 * (s[arc, 0] + s[arc, 1])
         a = vertices[edges[e, 0]]
-        direction = a + t * (vertices[edges[e, 1]] - a) - vertices[v]
-        direction /= np.sqrt(direction @ direction)
-        behind = False
-        for i in range(rest_off[v], rest_off[v + 1]):
-            if normals[rest_face[i]] @ direction < -cosine:
-                behind = True
-        if behind:
-            result[arc] = False
-            continue
-        e1, e2 = _perpendicular_frame(direction)
-        count = 0
-        for i in range(vf_off[v], min(vf_off[v + 1], vf_off[v] + 64)):
-            rate = normals[vf_face[i]] @ direction
-            if abs(rate) <= cosine:
-                continue
-            starts[count], lengths[count] = _contact_arc(
-                points, offsets, normals, vf_face[i], CONTACT_VERTEX, vf_corner[i], e1, e2
-            )
-            signs[count] = 1.0 if rate > 0.0 else -1.0
-            bounds[2 * count] = starts[count]
-            bounds[2 * count + 1] = (starts[count] + lengths[count]) % (2.0 * np.pi)
-            count += 1
-        if count == 0:
-            continue
-        ordered = np.sort(bounds[: 2 * count])
-        enters = True
-        for k in range(2 * count):
-            lo = ordered[k]
-            hi = ordered[k + 1] if k + 1 < 2 * count else ordered[0] + 2.0 * np.pi
-            if hi - lo <= cosine:
-                continue
-            middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
-            winding = 0.0
-            for j in range(count):
-                if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
-                    winding += signs[j]
-            if winding >= 0.0:
-                enters = False
-                break
-        result[arc] = not enters
+        result[arc] = _leaves_freely(
+            v, a + t * (vertices[edges[e, 1]] - a) - vertices[v], points, offsets, normals, vf_off, vf_face,
+            vf_corner, rest_off, rest_face, other_off, other_code, ef_off, ef_face, ef_local, cosine,
+        )  # fmt: skip
     return result
+
+
+@njit(cache=True)
+def _lines_leave_freely(vertex, directions, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off,
+                        rest_face, other_off, other_code, ef_off, ef_face, ef_local, cosine):
+    """(N,) bool: _leaves_freely for each line leaving vertex[i] (N,) int64 along directions[i] (N, 3)."""
+    result = np.empty(vertex.shape[0], dtype=np.bool_)
+    for i in range(vertex.shape[0]):
+        result[i] = _leaves_freely(
+            vertex[i], directions[i], points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
+            other_off, other_code, ef_off, ef_face, ef_local, cosine,
+        )  # fmt: skip
+    return result
+
+
+@njit(cache=True)
+def _arc_cuts(kind, codes, s, node, n_vertices, vertices, edges, node_start, node_direction, vertex_offsets,
+              vertex_arcs, tol, cosine):
+    """The nodes lying inside each EV arc, CSR: offsets (A+1,) int64, then s (C,) float64 increasing within an
+    arc and node (C,) int32: the nodes at the ends of the vertex's arcs whose line (node_start, unit
+    node_direction (N, 3)) passes through the vertex (within tol) and meets the arc's edge strictly inside
+    its range (by more than tol). None in a generic scene: there every node through the vertex on the swath
+    bounds the arc. In a degenerate one a corner of another object lying in the plane the lines slide in (a
+    box overhanging the one the vertex is on) changes what the lines meet there without ending the arc."""
+    n_arcs = kind.shape[0]
+    counts = np.zeros(n_arcs + 1, dtype=np.int64)
+    found_arc = []
+    found_s = []
+    found_node = []
+    for v in range(vertex_offsets.shape[0] - 1):
+        mine = vertex_arcs[vertex_offsets[v] : vertex_offsets[v + 1]]
+        if mine.shape[0] == 0:
+            continue
+        apex = vertices[v]
+        ends = np.unique(node[mine].ravel())
+        # the nodes whose line passes through the vertex (those at the ends of its arcs, unless merged)
+        keep = np.zeros(ends.shape[0], dtype=np.bool_)
+        for k in range(ends.shape[0]):
+            if ends[k] >= 0:
+                off = np.cross(apex - node_start[ends[k]], node_direction[ends[k]])
+                keep[k] = off @ off <= tol * tol
+        ends = ends[keep]
+        values = np.empty(ends.shape[0])
+        ids = np.empty(ends.shape[0], dtype=np.int32)
+        for arc in mine:
+            if node[arc, 0] < 0 or node[arc, 1] < 0:
+                continue
+            e = codes[arc, 1] - n_vertices
+            a = vertices[edges[e, 0]]
+            along = vertices[edges[e, 1]] - a
+            length = np.sqrt(along @ along)
+            normal = np.cross(along, a - apex)
+            height = np.sqrt(normal @ normal) / length
+            normal /= np.sqrt(normal @ normal)
+            count = 0
+            for n in ends:
+                if n == node[arc, 0] or n == node[arc, 1]:
+                    continue
+                d = node_direction[n]
+                # a line through the vertex within tol of a point of the edge leans off the swath's plane by at
+                # most 2 tol over the vertex's distance to the edge
+                if abs(normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2]) * height > 2.0 * tol:
+                    continue
+                across = np.cross(along, d)
+                scale = across @ across
+                if scale <= cosine * length * length:
+                    continue
+                at = -(np.cross(a - apex, d) @ across) / scale
+                if (at - s[arc, 0]) * length <= tol or (s[arc, 1] - at) * length <= tol:
+                    continue
+                miss = np.cross(a + at * along - apex, d)
+                if miss @ miss <= tol * tol:
+                    values[count] = at
+                    ids[count] = n
+                    count += 1
+            order = np.argsort(values[:count])
+            for k in order:
+                found_arc.append(arc)
+                found_s.append(values[k])
+                found_node.append(ids[k])
+            counts[arc + 1] = count
+    offsets = np.cumsum(counts)
+    cut_s = np.empty(offsets[-1])
+    cut_node = np.empty(offsets[-1], dtype=np.int32)
+    # found vertex by vertex: put in arc order
+    fill = offsets[:-1].copy()
+    for k in range(len(found_arc)):
+        cut_s[fill[found_arc[k]]] = found_s[k]
+        cut_node[fill[found_arc[k]]] = found_node[k]
+        fill[found_arc[k]] += 1
+    return offsets, cut_s, cut_node
+
+
+@njit(cache=True)
+def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
+                   other_off, other_code, ef_off, ef_face, ef_local, cosine):
+    """Whether the line leaving vertex v along `direction` (3,) goes into free space, not into a solid. Its
+    own faces decide first (see _enters); a vertex resting inside another object's face (rest_off, rest_face:
+    see _resting_on) sends the lines behind that face into its object, and one at another object's vertex or
+    on its edge (other_off, other_code: see _elements_at) the lines into the solid around that element, the
+    faces of each element winding on their own."""
+    n_vertices = vf_off.shape[0] - 1
+    direction = direction / np.sqrt(direction @ direction)
+    for i in range(rest_off[v], rest_off[v + 1]):
+        if normals[rest_face[i]] @ direction < -cosine:
+            return False
+    faces = np.empty(64, dtype=np.int64)
+    kinds = np.empty(64, dtype=np.int64)
+    corners = np.empty(64, dtype=np.int64)
+    e1, e2 = _perpendicular_frame(direction)
+    for j in range(other_off[v] - 1, other_off[v + 1]):
+        # first the vertex's own faces (j = other_off[v] - 1), then each other element's
+        code = v if j < other_off[v] else other_code[j]
+        count = 0
+        if code < n_vertices:
+            for i in range(vf_off[code], min(vf_off[code + 1], vf_off[code] + 64)):
+                faces[count] = vf_face[i]
+                kinds[count] = CONTACT_VERTEX
+                corners[count] = vf_corner[i]
+                count += 1
+        else:
+            e = code - n_vertices
+            for i in range(ef_off[e], min(ef_off[e + 1], ef_off[e] + 64)):
+                faces[count] = ef_face[i]
+                kinds[count] = CONTACT_EDGE
+                corners[count] = ef_local[i]
+                count += 1
+        if _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine):
+    """Whether a line leaving a point along unit `direction` (frame e1, e2 across it) enters a solid whose
+    faces meet there: faces[:count] touched as kinds[:count] (CONTACT_VERTEX at corner, CONTACT_EDGE along the
+    edge from corner) wind -1 around every direction, counted with the sign of normal . direction. Faces seen
+    edge-on (sliding) count nothing; with none left the line enters nothing."""
+    starts = np.empty(count)
+    lengths = np.empty(count)
+    signs = np.empty(count)
+    bounds = np.empty(2 * count)
+    n = 0
+    for i in range(count):
+        rate = normals[faces[i]] @ direction
+        if abs(rate) <= cosine:
+            continue
+        starts[n], lengths[n] = _contact_arc(points, offsets, normals, faces[i], kinds[i], corners[i], e1, e2)
+        signs[n] = 1.0 if rate > 0.0 else -1.0
+        bounds[2 * n] = starts[n]
+        bounds[2 * n + 1] = (starts[n] + lengths[n]) % (2.0 * np.pi)
+        n += 1
+    if n == 0:
+        return False
+    ordered = np.sort(bounds[: 2 * n])
+    for k in range(2 * n):
+        lo = ordered[k]
+        hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + 2.0 * np.pi
+        if hi - lo <= cosine:
+            continue
+        middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
+        winding = 0.0
+        for j in range(n):
+            if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
+                winding += signs[j]
+        if winding >= 0.0:
+            return False
+    return True
+
+
+def _collinear_edges(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """CSR (offsets (E+1,) int64, edges int64): for each edge, the other edges on its line (within the
+    tolerance length) overlapping it by more than that length: the top edges of two boxes of one height side
+    by side, a box's edge on the edge of the one it stands on."""
+    n_edges = len(scene.edges)
+    ends = scene.vertices[scene.edges]
+    direction = ends[:, 1] - ends[:, 0]
+    length = np.linalg.norm(direction, axis=1)
+    direction /= length[:, None]
+    line = coincident_nodes(ends[:, 0], direction, scene.diagonal, scene.tol.length)
+    tol = scene.tol.length
+    pairs = []
+    for root in np.flatnonzero(np.bincount(line, minlength=n_edges) > 1):
+        members = np.flatnonzero(line == root)
+        base, axis = ends[root, 0], direction[root]
+        lo = np.minimum(ends[members, 0] @ axis, ends[members, 1] @ axis) - base @ axis
+        hi = np.maximum(ends[members, 0] @ axis, ends[members, 1] @ axis) - base @ axis
+        overlap = np.minimum(hi[:, None], hi[None]) - np.maximum(lo[:, None], lo[None]) > tol
+        np.fill_diagonal(overlap, False)
+        pairs.extend(zip(members[np.nonzero(overlap)[0]], members[np.nonzero(overlap)[1]], strict=True))
+    pairs = np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
+    offsets = np.zeros(n_edges + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(np.bincount(pairs[:, 0], minlength=n_edges))
+    return offsets, pairs[:, 1]
 
 
 def _chain(segments, vertex: int, source: int) -> list[np.ndarray]:

@@ -258,6 +258,24 @@ def test_lazy_sources_keep_exactly_the_lines_through_them(name):
     assert len(both) == int(either.sum())
 
 
+def test_lazy_source_whose_plane_holds_far_edges():
+    """A box's bottom face on the floor: lines lying in the floor's plane count as crossing it wherever they run
+    (within tol of its plane), so lines along the floor far from the box must be kept, however far from the
+    face the lazy construction's culling is."""
+    scene = contact_scene()
+    full = fast(scene)
+    floor_plane = (np.abs(scene.normals[:, 2]) > 0.999) & (np.abs(scene.plane_offsets) <= scene.tol.length)
+    box_bottom = int(np.flatnonzero(floor_plane & (scene.object_ids == scene.object_ids.max()))[0])
+    lazy = fast(scene, sources=[box_bottom])
+    through = crosses(scene, full.origin, full.direction, box_bottom)
+    expected = NodeCandidates(*(a[through] for a in (full.kind, full.vertices, full.edges, full.origin,
+                                                      full.direction)))  # fmt: skip
+    along_floor = np.abs(expected.direction[:, 2]) <= scene.tol.cosine
+    far = np.linalg.norm(expected.origin[:, :2] - scene.centroids[box_bottom, :2], axis=1) > 1.0
+    assert (along_floor & far).sum() > 10, "the scene should have lines along the floor far from the box"
+    assert line_keys(lazy) == line_keys(expected)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # scale invariance
 
