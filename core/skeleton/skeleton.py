@@ -58,7 +58,7 @@ contact is decided within, far below the size of any feature of a sane scene."""
 
 @dataclass(frozen=True, eq=False)
 class Probes:
-    """The probed pieces of EV arcs (see Skeleton._probe_arcs), CSR: offsets (A+1,) int64 into the pieces, an
+    """The probed pieces of EV arcs (see Skeleton._probe_arcs), CSR: offsets (A+1,) int32 into the pieces, an
     arc's pieces in increasing s (none for an arc not probed); s (K, 2) float64 and node (K, 2) int32 each
     piece's bounds on the arc's edge and their nodes; seen (K, 2) int32 the face group each side of the
     piece's swath sees (+1 side: the side cross(b - a, apex - a) points to, then -1 side; -1 none)."""
@@ -528,7 +528,7 @@ class Skeleton:
         ends = np.isin(arcs.ends[:, :, 1], (END_PLANAR, END_FREE)).any(axis=1)
         wanted = (arcs.kind == ARC_EV) & ~arcs.dangling & (ends | (cuts > 0))
         counts = np.where(wanted, cuts + 1, 0)
-        offsets = np.zeros(len(arcs) + 1, dtype=np.int64)
+        offsets = np.zeros(len(arcs) + 1, dtype=np.int32)
         offsets[1:] = np.cumsum(counts)
         arc = np.repeat(np.arange(len(arcs)), counts)
         # each piece runs from the arc's start or a cut to the next cut or the arc's end
