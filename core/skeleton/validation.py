@@ -1015,14 +1015,15 @@ farther in to the generator's group."""
 def _pierced_between(
     points, offsets, normals, plane_offsets,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-    vertices, edges, gk, gid, ng, start, u, tol, c_poly, c_t, c_kind, c_local, stack,
+    vertices, edges, gk, gid, ng, start, u, tol, c_poly, c_t, c_kind, c_local, stack, probe_start, probe_end,
 ):  # fmt: skip
     """Whether the line start + tau u (u unit) crosses a polygon's interior strictly between where it meets its
     first and its last generator (gk, gid: ng of them), beyond any doubt: such a line is rejected as blocked
     by the full cast, which this short cast spares (most candidates are). The generators' contacts are bounded
     from the geometry: a vertex within tol of its projection, an edge within tol over the sine of its angle
     to the line of the point nearest to it; both bounds are grown by _CHAIN_LENGTHS tolerance lengths. False
-    when unsure (an edge nearly along the line, generators too close together)."""
+    when unsure (an edge nearly along the line, generators too close together). probe_start, probe_end: (3,)
+    float64 scratch for the inner segment (this runs for every candidate)."""
     inner_lo = np.inf
     inner_hi = -np.inf
     for j in range(ng):
@@ -1052,10 +1053,13 @@ def _pierced_between(
         inner_hi = max(inner_hi, tau - (spread + _CHAIN_LENGTHS * tol))
     if not inner_lo < inner_hi:
         return False
+    for k in range(3):
+        probe_start[k] = start[k] + inner_lo * u[k]
+        probe_end[k] = start[k] + inner_hi * u[k]
     found = _gather_contacts(
         points, offsets, normals, plane_offsets,
         node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-        start + inner_lo * u, start + inner_hi * u, -1, -1, tol, True, False, c_poly, c_t, c_kind, c_local, stack,
+        probe_start, probe_end, -1, -1, tol, True, False, c_poly, c_t, c_kind, c_local, stack,
     )  # fmt: skip
     return found < 0
 
@@ -1127,6 +1131,8 @@ def _validate_chunk(
     arc_len = scratch.arc_len
     bounds = scratch.bounds
     segment_start = np.empty(3)
+    probe_start = np.empty(3)
+    probe_end = np.empty(3)
     segment_end = np.empty(3)
     segment_direction = np.empty(3)
     gk = np.zeros(4, dtype=np.int8)
@@ -1169,6 +1175,7 @@ def _validate_chunk(
             points, offsets, normals, plane_offsets,
             node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
             vertices, edges, gk, gid, ng, segment_start, segment_direction, tol, c_poly, c_t, c_kind, c_local, stack,
+            probe_start, probe_end,
         ):  # fmt: skip
             counters[REJECT_BLOCKED] += 1
             continue

@@ -73,7 +73,7 @@ def test_early_rejection_only_rejects_lines_blocked_between_their_generators(nam
     sample = rng.choice(len(candidates), size=min(3000, len(candidates)), replace=False)
     capacity = 4096
     scratch = (np.empty(capacity, np.int64), np.empty(capacity), np.empty(capacity, np.int8),
-               np.empty(capacity, np.int64), np.empty(STACK_SIZE, np.int64))  # fmt: skip
+               np.empty(capacity, np.int64), np.empty(STACK_SIZE, np.int64), np.empty(3), np.empty(3))  # fmt: skip
     rejected = 0
     for c in sample:
         direction = candidates.direction[c] / np.linalg.norm(candidates.direction[c])
