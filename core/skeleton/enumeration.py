@@ -1024,14 +1024,14 @@ def _segment_reaches_sources(q, nb, centre, radius, src, centres, radii, normals
 
 @njit(cache=True)
 def _register(
-    q, nb, depth, use_mask, mask, ends, target_ids, n, margin, eps, keys, targets, sides, bits, count,
+    q, nb, depth, lazy, mask, ends, target_ids, n, margin, eps, keys, targets, sides, bits, count,
     src, centres, radii, normals, plane_offsets, tol,
 ):  # fmt: skip
     """Append (key, target, side, bits) for every cell of every bin through which target edge ends[t] (2, 3)
     may be reached from the bin within the cell's depth bound. key = b * 3 n n + cell; side 0 along the
     canonical direction; bits (uint64) the sub-cells of an 8 x 8 split of the cell that the directions from
     the bin to the target reach (_sub_cells). Grows the arrays when full; returns (keys, targets, sides, bits,
-    count). With use_mask (a lazy build), only the cells of `mask` are worked for, and targets that no line
+    count). Only the cells of `mask` (nb, 3 n n) bool are worked for; in a lazy build, targets that no line
     through the bin and a source polygon `src` (within tol) meets within the margin are skipped at once."""
     quad = np.empty((4, 3))
     buf_a = np.empty((_CLIP, 3))
@@ -1051,10 +1051,10 @@ def _register(
         reach = 0.0
         for side in range(2):
             for cell in range(n_cells):
-                if depth[b, side, cell] > reach and not (use_mask and not mask[b, cell]):
+                if depth[b, side, cell] > reach and mask[b, cell]:
                     reach = depth[b, side, cell]
         for t in range(target_ids.shape[0]):
-            if use_mask:
+            if lazy:
                 for c in range(3):
                     middle[c] = 0.5 * (ends[t, 0, c] + ends[t, 1, c])
                 half = 0.5 * np.sqrt((ends[t, 1, 0] - ends[t, 0, 0]) ** 2 + (ends[t, 1, 1] - ends[t, 0, 1]) ** 2
@@ -1105,7 +1105,7 @@ def _register(
                             continue
                         for j in range(j0, j1 + 1):
                             cell = (a * n + i) * n + j
-                            if use_mask and not mask[b, cell]:
+                            if not mask[b, cell]:
                                 continue
                             bound = depth[b, side, cell]
                             lo_w = -1.0 + 2.0 * j / n - eps
@@ -1232,6 +1232,40 @@ def _edge_pierced(e, d, vertices, edges, ef_off, ef_inward, delta):
         else:
             negative = True
     return positive and negative
+
+
+@njit(cache=True)
+def _mask_pierced_cells(e, vertices, edges, ef_off, ef_inward, grid, n, delta, mask):
+    """Clear mask[:, cell] (mask (nb, 3 n n) bool) for the cells whose every direction pierces edge e as
+    _edge_pierced decides, beyond its undecided band: no line of such a cell has e as an inner generator.
+    The side of face k is the sign of d . (inward_k x along), linear in d, and a unit d of the cell is a
+    combination of the cell's four unit corner directions with weights summing to at least 1, so a margin
+    holding at the four corners holds over the cell (and for -d, with both signs swapped)."""
+    along = vertices[edges[e, 1]] - vertices[edges[e, 0]]
+    bound = delta * _norm(along)
+    n_faces = ef_off[e + 1] - ef_off[e]
+    if n_faces < 2:
+        return
+    sides = np.empty((n_faces, 3))
+    for k in range(n_faces):
+        sides[k] = _cross(ef_inward[ef_off[e] + k], along)
+    for a in range(3):
+        for i in range(n):
+            for j in range(n):
+                positive = False
+                negative = False
+                for k in range(n_faces):
+                    above = True
+                    below = True
+                    for di in range(2):
+                        for dj in range(2):
+                            value = _dot(grid[a, i + di, j + dj], sides[k])
+                            above = above and value > bound
+                            below = below and value < -bound
+                    positive = positive or above
+                    negative = negative or below
+                if positive and negative:
+                    mask[:, (a * n + i) * n + j] = False
 
 
 @njit(cache=True)
@@ -1900,8 +1934,9 @@ def _edge_candidates(
         mask = np.ones((nb, n_cells), dtype=np.bool_)
         if lazy:
             _source_mask(q, nb, src, points, offsets, normals, plane_offsets, edge_out, grid, n, tol, delta, mask)
-            if not mask.any():
-                continue
+        _mask_pierced_cells(e, vertices, edges, ef_off, ef_inward, grid, n, delta, mask)
+        if not mask.any():
+            continue
         depth = np.full((nb, 2, n_cells), np.inf)
         _depth_map(
             q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
