@@ -78,8 +78,10 @@ MAX_CELLS = 15
 one). Finer cells prune more but repeat the work of every pair of targets the cells share; the best count grows
 with the scene (_cells_per_side)."""
 
-BIN_FRACTION = 1.0 / 12.0
-"""An edge source is cut into bins no longer than this fraction of the scene diagonal (at most MAX_BINS)."""
+BIN_CELLS = 0.4
+"""An edge source is cut into bins no longer than this fraction of the scene diagonal over the cells per side
+(at most MAX_BINS): finer cells, shorter bins. Measured on the office family (E4 enumeration, one thread)
+against bins of 1/12 of the diagonal: 1 % faster at 312 polygons, 6 % at 756, 6 % at 1056, 12 % at 1488."""
 
 MAX_BINS = 8
 
@@ -130,7 +132,7 @@ def iter_candidates(
     lengths = np.linalg.norm(
         scene.vertices[scene.edges[edge_ids, 1]] - scene.vertices[scene.edges[edge_ids, 0]], axis=1
     )
-    bins = np.clip(np.ceil(lengths / (BIN_FRACTION * scene.diagonal)), 1, MAX_BINS).astype(np.int64)
+    bins = np.clip(np.ceil(lengths * cells / (BIN_CELLS * scene.diagonal)), 1, MAX_BINS).astype(np.int64)
 
     # work units, for the fraction: a vertex map, its VV and VEE lines, an edge bin's E4 lines, a face's lines
     steps = []
