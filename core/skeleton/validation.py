@@ -857,9 +857,12 @@ def _relaxed_arc(
                 j = k
         blocked = False
         partner = _partner(pair, j)
+        crossed = -1
         if pencil >= 0 and partner >= 0:
-            # the pencil's contact slides along the norm edge, off the crossing
+            # the pencil's contact slides along the norm edge, off the crossing; the lines cross the partner edge
+            # too, before or after the norm edge: its faces are a generator's, grazed, not faces in front
             j = norm_index
+            crossed = r_id[norm_partner]
             partner = -1
         if partner >= 0:
             # the lines keep the crossing point: as at a vertex, every face there (those of both edges, which
@@ -917,6 +920,8 @@ def _relaxed_arc(
             for i in range(g_lo[g], g_hi[g]):
                 if _is_incident_face(c_poly[i], GEN_EDGE, r_id[j], vf_off, vf_face, ef_off, ef_face):
                     continue
+                if crossed >= 0 and _is_incident_face(c_poly[i], GEN_EDGE, crossed, vf_off, vf_face, ef_off, ef_face):
+                    continue
                 hit, shift = _displaced_hit(
                     points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol
                 )
@@ -952,6 +957,11 @@ def _relaxed_arc(
                 points, offsets, normals, GEN_EDGE, r_id[j], vf_off, vf_face, vf_corner, ef_off, ef_face,
                 ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
             )  # fmt: skip
+            if not blocked and crossed >= 0:
+                blocked = _generator_blocked(
+                    points, offsets, normals, GEN_EDGE, crossed, vf_off, vf_face, vf_corner, ef_off, ef_face,
+                    ef_local, tilted, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
+                )  # fmt: skip
             # another object's edge collinear with this one (boxes side by side or stacked flush), met here or
             # from its corner here on the side the contact slides to, keeps meeting the lines: its faces close
             # around them with the edge's own (lines over the seam of two coplanar tops go into the other box)
@@ -1168,6 +1178,88 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
 
 
 @njit(cache=True)
+def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
+                         group_v, extra, gk, gid, gg, ng):  # fmt: skip
+    """The arcs of the pencils in the plane of vertex generator v's edge e_v and another object's edge `extra`
+    through v (a box's corner on the edge of a box beside or under it: a T-junction), about a generator edge
+    piercing that plane: their lines cross both edges, the contact on e_v moving into it from v, as at a
+    crossing of two edges (FXE nodes) away from its ends. gk, gid, gg: the node's ng generators and their
+    groups. Returns the next free row (_validate_chunk leaves room for these rows)."""
+    g_ = geometry
+    u = line.u
+    across_extra = _edge_direction(g_.vertices, g_.edges, extra, -1)
+    for slot in range(ve_off[v], ve_off[v + 1]):
+        e_v = ve_edge[slot]
+        if not edge_mask[e_v]:
+            continue
+        into = _edge_direction(g_.vertices, g_.edges, e_v, v)
+        normal = _cross(into, across_extra)
+        length = np.sqrt(_dot(normal, normal))
+        # e_v along `extra` (boxes side by side) spans no plane; lines off the plane are no pencil of it
+        if length <= g_.angle_tol or abs(_dot(normal, u)) > g_.angle_tol * length:
+            continue
+        # the lines run from their contact on e_v to their contact on `extra` within the angle of the two edges
+        # at v (to first order, along `wedge`): where the objects of both touch there, face against face (boxes
+        # side by side, seen in their contact plane), such lines are inside the solids
+        turn = _dot(_cross(u, across_extra), normal)
+        if turn == 0.0:
+            continue
+        wedge = _along(into, _dot(_cross(u, into), normal) / turn, across_extra)
+        if _faces_meet_in(g_, e_v, extra, _row(g_.vertices, v), wedge, _over(normal, length)):
+            continue
+        for k in range(ng):
+            if gk[k] != GEN_EDGE:
+                continue
+            if abs(_dot(_edge_direction(g_.vertices, g_.edges, gid[k], -1), normal)) <= g_.angle_tol * length:
+                continue
+            r_kind, r_id, r_group, r_pin = retained
+            r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
+            r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
+            r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, group_v
+            n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
+            r_pin[1] = -1
+    return n_inc
+
+
+@njit(cache=True)
+def _faces_meet_in(geometry, e, f, point, direction, normal):
+    """Whether a face of edge e and a face of edge f, both in the plane of unit `normal` and facing each other,
+    both hold the points just off `point` (on both edges) along `direction` (in that plane)."""
+    g_ = geometry
+    for i in range(g_.ef_off[e], g_.ef_off[e + 1]):
+        a = g_.ef_face[i]
+        if abs(_dot(_row(g_.normals, a), normal)) < 1.0 - g_.angle_tol or \
+                not _moves_inside(g_.points, g_.offsets, g_.normals, a, point, direction, g_.tol):  # fmt: skip
+            continue
+        for k in range(g_.ef_off[f], g_.ef_off[f + 1]):
+            b = g_.ef_face[k]
+            if _dot(_row(g_.normals, a), _row(g_.normals, b)) <= -1.0 + g_.angle_tol and \
+                    _moves_inside(g_.points, g_.offsets, g_.normals, b, point, direction, g_.tol):  # fmt: skip
+                return True
+    return False
+
+
+@njit(cache=True)
+def _moves_inside(points, offsets, normals, poly, point, direction, tol):
+    """Whether `point`, on convex polygon `poly` (within tol), moved a little along `direction` (in its plane)
+    lies strictly inside it."""
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = _row(normals, poly)
+    size = np.sqrt(_dot(direction, direction))
+    for k in range(count):
+        a = _row(points, first + k)
+        inward = _cross(normal, _minus(_row(points, first + (k + 1) % count), a))
+        inward = _over(inward, np.sqrt(_dot(inward, inward)))
+        depth = _dot(_minus(point, a), inward)
+        if depth > tol:
+            continue
+        if depth < -tol or _dot(direction, inward) <= _SIDE_EPS * size:
+            return False
+    return True
+
+
+@njit(cache=True)
 def _grown(incidences, n_inc):
     """_Incidences with room for twice as many rows, the first n_inc copied: rows an arc call site cannot
     bound in advance (edges crossing a vertex's edge along a node's line)."""
@@ -1276,6 +1368,29 @@ def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
     return edge
 
 
+@njit(cache=True)
+def _candidate_rows(cand_vertices, cand_edges, ve_off, c):
+    """Most incidence rows candidate c records but those of _arcs_off_edge and _pencils_at_junction."""
+    rows = 0
+    for k in range(2):
+        v = cand_vertices[c, k]
+        if v >= 0:
+            rows += ve_off[v + 1] - ve_off[v]
+    for k in range(4):
+        if cand_edges[c, k] >= 0:
+            rows += 2
+    if cand_vertices[c, 0] >= 0:
+        # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions; of a
+        # vertex replaced by an edge through it: up to 2 vertices x 2 directions
+        rows += 12
+    if cand_vertices[c, 1] >= 0:
+        # EEE arcs of two vertices and an edge beyond: 2 sides x an edge of each vertex
+        v = cand_vertices[c, 0]
+        w = cand_vertices[c, 1]
+        rows += 2 * (ve_off[v + 1] - ve_off[v]) * (ve_off[w + 1] - ve_off[w])
+    return rows
+
+
 @njit(cache=True, nogil=True)
 def _validate_chunk(
     geometry, plane_offsets, corner_vertex, corner_edge, bvh_arrays, ve_off, ve_edge, edge_mask,
@@ -1288,22 +1403,7 @@ def _validate_chunk(
     n_vertices = vertices.shape[0]
     bound = 0
     for c in range(n_cand):
-        for k in range(2):
-            v = cand_vertices[c, k]
-            if v >= 0:
-                bound += ve_off[v + 1] - ve_off[v]
-        for k in range(4):
-            if cand_edges[c, k] >= 0:
-                bound += 2
-        if cand_vertices[c, 0] >= 0:
-            # arcs of a dropped vertex with an edge beyond: 2 sides x up to 2 vertices x 2 directions; of a
-            # vertex replaced by an edge through it: up to 2 vertices x 2 directions
-            bound += 12
-        if cand_vertices[c, 1] >= 0:
-            # EEE arcs of two vertices and an edge beyond: 2 sides x an edge of each vertex
-            v = cand_vertices[c, 0]
-            w = cand_vertices[c, 1]
-            bound += 2 * (ve_off[v + 1] - ve_off[v]) * (ve_off[w + 1] - ve_off[w])
+        bound += _candidate_rows(cand_vertices, cand_edges, ve_off, c)
     node_cand = np.empty(n_cand, dtype=np.int64)
     node_kind = np.empty(n_cand, dtype=np.int8)
     node_gkind = np.zeros((n_cand, 4), dtype=np.int8)
@@ -1348,6 +1448,15 @@ def _validate_chunk(
     n_nodes = 0
     n_inc = 0
     for c in range(n_cand):
+        # the pencils of a vertex on another object's edge (an edge of it x 2 pivots) are rare: the rows left
+        # for them are checked here instead of bounded above
+        need = _candidate_rows(cand_vertices, cand_edges, ve_off, c)
+        for k in range(2):
+            v = cand_vertices[c, k]
+            if v >= 0:
+                need += 2 * (ve_off[v + 1] - ve_off[v])
+        while n_inc + need > incidences.node.shape[0]:
+            incidences = _grown(incidences, n_inc)
         ng = 0
         for k in range(2):
             if cand_vertices[c, k] >= 0:
@@ -1565,6 +1674,10 @@ def _validate_chunk(
                 n_inc = _relax(
                     geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
+            n_inc = _pencils_at_junction(
+                geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j],
+                extra, gk, gid, gg, ng,
+            )  # fmt: skip
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
         # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge

@@ -80,6 +80,21 @@ SCENES = {
     "boxes pressed face to face": lambda: boxes_in_room(
         [((1.0, 1.0, 0.5), (2.0, 2.0, 1.1)), ((2.0, 1.0, 0.5), (2.3, 2.0, 1.3))]
     ),
+    # two boxes of one height side by side, a corner of the first on the second's top edge (a T-junction), and a
+    # floating box whose edge pierces their tops' plane: the lines of that plane through the piercing point
+    # and the first box's top edge near the corner cross the second's edge too, a pencil ending at the line
+    # through the corner (furnished room 152)
+    "box corner on another box's edge": lambda: boxes_in_room(
+        [((2.2, 2.3, 0.6), (3.0, 3.4, 1.3)), ((3.0, 2.8, 0.6), (3.5, 3.7, 1.3)), ((0.0, 2.9, 1.0), (0.3, 3.7, 1.6))],
+        size=(3.7, 3.8, 2.5),
+    ),
+    # a box stacked across the top edge of another, overhanging it, and a floating box's edge piercing the
+    # contact plane: the pencil about the piercing point through the crossing of the two edges, on the side
+    # where the lines pass under the overhang before the lower top edge (furnished room 40)
+    "crossing seen from under the overhang": lambda: boxes_in_room(
+        [((3.0, 1.9, 0.0), (4.0, 2.3, 1.25)), ((3.1, 1.8, 1.25), (3.8, 2.6, 1.7)), ((2.4, 1.7, 0.9), (2.9, 2.3, 1.7))],
+        size=(5.2, 5.1, 3.4),
+    ),
 }
 
 CLOSED = ["generic room 0", "generic room 1", "generic room 2", "furnished room 0"]
@@ -88,7 +103,8 @@ BOX_ROOMS = ["floating box", "box on floor", "box on wall", "box in corner"]
 # touching, stacked and pressed boxes (the views of their vertices run along contact planes and collinear edges)
 TOUCHING = ["box on box", "boxes stacked flush", "boxes side by side", "box pressed against a box on the wall",
             "box overhanging", "box overhanging a corner", "boxes pressed face to face", "lamp table",
-            "furnished room 0"]  # fmt: skip
+            "furnished room 0", "box corner on another box's edge",
+            "crossing seen from under the overhang"]  # fmt: skip
 
 
 @cache
@@ -203,6 +219,7 @@ def test_view_arcs_have_both_end_nodes(name):
     [
         "generic room 0", "generic room 1", "generic room 2", *BOX_ROOMS, "box on box", "boxes stacked flush",
         "boxes side by side", "box overhanging", "box overhanging a corner", "furnished room 0", "furnished room 10",
+        "box corner on another box's edge", "crossing seen from under the overhang",
     ],
 )  # fmt: skip
 def test_no_dangling_arc_in_closed_rooms(name):
@@ -482,9 +499,11 @@ def test_furnished_rooms_build_without_exception_or_nan():
 @pytest.mark.xfail(
     strict=True,
     reason="arcs whose lines lie in the contact plane of stacked or side-by-side boxes (END_PLANAR: pencils "
-    "through a vertex or where an edge crosses that plane, keyed by two edges of the plane that cross or meet "
-    "at a corner on the other's edge) still lack end nodes; 173 of 200 rooms have some, 1 052 arcs (5 393 in "
-    "186 rooms before the crossing nodes; bench skeleton --furnished)",
+    "through a vertex or where an edge crosses that plane) still lack end nodes, mostly where the lines graze "
+    "another object's edge lying in that plane between their generators (a first-order test that cannot tell "
+    "grazing from entering rejects them at one end only); 156 of 200 rooms have some, 619 arcs (1 052 in 173 "
+    "rooms before the pencils at T-junctions and on both sides of crossings, 5 393 in 186 before the crossing "
+    "nodes; bench skeleton --furnished)",
 )
 def test_furnished_rooms_have_no_dangling_arc():
     dangling = {seed: _furnished_skeleton(seed).stats["dangling_arcs"] for seed in FURNISHED_SAMPLE}
