@@ -334,10 +334,12 @@ def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
 
 
 @njit(cache=True)
-def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
+def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol, corners):
     """Whether `point` (in the polygon's plane) moved by a small multiple of `delta` (in that plane) lies
-    strictly inside the polygon: inside by more than tol from every side, or on one side and moving inwards.
-    Within tol of two sides (a corner) a first-order motion tells nothing: not inside."""
+    strictly inside the polygon: inside by more than tol from every side, or on a side and moving inwards from
+    it. Within tol of two sides (a corner): with `corners`, inside when it moves inwards from both (a point
+    known to lie at the corner); without, not inside (a point merely near a corner, where a first-order motion
+    tells nothing)."""
     first = offsets[poly]
     count = offsets[poly + 1] - first
     normal = _row(normals, poly)
@@ -351,7 +353,7 @@ def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol):
         if depth > tol:
             continue
         on_sides += 1
-        if depth < -tol or on_sides > 1 or _dot(delta, inward) <= _SIDE_EPS * delta_len:
+        if depth < -tol or (on_sides > 1 and not corners) or _dot(delta, inward) <= _SIDE_EPS * delta_len:
             return False
     return True
 
@@ -379,8 +381,8 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
             tau = 0.5 * (a + b)
             point = _along(start, tau, u)
             delta = _along(alpha, tau / diag, beta)
-            if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol) and \
-                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol):  # fmt: skip
+            if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol, False) and \
+                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol, False):  # fmt: skip
                 return True
     return False
 
@@ -1226,37 +1228,18 @@ def _faces_meet_in(geometry, e, f, point, direction, normal):
     """Whether a face of edge e and a face of edge f, both in the plane of unit `normal` and facing each other,
     both hold the points just off `point` (on both edges) along `direction` (in that plane)."""
     g_ = geometry
+    points, offsets, normals = g_.points, g_.offsets, g_.normals
     for i in range(g_.ef_off[e], g_.ef_off[e + 1]):
         a = g_.ef_face[i]
-        if abs(_dot(_row(g_.normals, a), normal)) < 1.0 - g_.angle_tol or \
-                not _moves_inside(g_.points, g_.offsets, g_.normals, a, point, direction, g_.tol):  # fmt: skip
+        if abs(_dot(_row(normals, a), normal)) < 1.0 - g_.angle_tol or \
+                not _inside_to_first_order(points, offsets, normals, a, point, direction, g_.tol, True):  # fmt: skip
             continue
         for k in range(g_.ef_off[f], g_.ef_off[f + 1]):
             b = g_.ef_face[k]
-            if _dot(_row(g_.normals, a), _row(g_.normals, b)) <= -1.0 + g_.angle_tol and \
-                    _moves_inside(g_.points, g_.offsets, g_.normals, b, point, direction, g_.tol):  # fmt: skip
+            if _dot(_row(normals, a), _row(normals, b)) <= -1.0 + g_.angle_tol and \
+                    _inside_to_first_order(points, offsets, normals, b, point, direction, g_.tol, True):  # fmt: skip
                 return True
     return False
-
-
-@njit(cache=True)
-def _moves_inside(points, offsets, normals, poly, point, direction, tol):
-    """Whether `point`, on convex polygon `poly` (within tol), moved a little along `direction` (in its plane)
-    lies strictly inside it."""
-    first = offsets[poly]
-    count = offsets[poly + 1] - first
-    normal = _row(normals, poly)
-    size = np.sqrt(_dot(direction, direction))
-    for k in range(count):
-        a = _row(points, first + k)
-        inward = _cross(normal, _minus(_row(points, first + (k + 1) % count), a))
-        inward = _over(inward, np.sqrt(_dot(inward, inward)))
-        depth = _dot(_minus(point, a), inward)
-        if depth > tol:
-            continue
-        if depth < -tol or _dot(direction, inward) <= _SIDE_EPS * size:
-            return False
-    return True
 
 
 @njit(cache=True)
