@@ -376,7 +376,7 @@ def bvh_collect_in_planes(
 def segment_box_range(start, inv_direction, direction, box_lo, box_hi, t_lo, t_hi):
     """Clip the parameter range [t_lo, t_hi] of start + t * direction to a closed box.
 
-    start, direction, inv_direction (3,) float64 (inv_direction[k] = 1 / direction[k], unused where
+    start, direction, inv_direction (3,) float64 arrays or 3-tuples (inv_direction[k] = 1 / direction[k], unused where
     direction[k] == 0), box_lo, box_hi (3,). Returns (entry, exit); entry > exit means a miss.
     """
     entry = t_lo
@@ -401,12 +401,12 @@ def segment_box_range(start, inv_direction, direction, box_lo, box_hi, t_lo, t_h
 
 @njit(cache=True)
 def inverse_direction(direction):
-    """(3,) float64 reciprocals of the direction's components, 0 where a component is 0 (never used there)."""
-    inv = np.zeros(3)
-    for k in range(3):
-        if direction[k] != 0.0:
-            inv[k] = 1.0 / direction[k]
-    return inv
+    """3-tuple of the reciprocals of the direction's components, 0 where a component is 0 (never used there)."""
+    return (
+        1.0 / direction[0] if direction[0] != 0.0 else 0.0,
+        1.0 / direction[1] if direction[1] != 0.0 else 0.0,
+        1.0 / direction[2] if direction[2] != 0.0 else 0.0,
+    )
 
 
 @njit(cache=True)

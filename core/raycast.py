@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from .bvh import STACK_SIZE, inverse_direction, segment_box_range
+from .jit import njit_leaf
 from .scene import EDGE_FLAT, VERTEX_SILHOUETTE
 
 CONTACT_NONE = 0
@@ -276,7 +277,7 @@ def _edge_normal(points, a, b, normal):
     return mx / norm, my / norm, mz / norm
 
 
-@njit(cache=True)
+@njit_leaf
 def _classify_point(points, first, count, normal, px, py, pz, tol):
     """Where a point of the polygon's plane lies: (CONTACT_* or CONTACT_NONE, local feature index).
 
@@ -319,7 +320,7 @@ def _classify_point(points, first, count, normal, px, py, pz, tol):
     return CONTACT_VERTEX, nearest
 
 
-@njit(cache=True)
+@njit_leaf
 def _polygon_contact(points, offsets, normals, plane_offsets, polygon, start, end, tol):
     """Contact of the open segment start-end with one polygon: (CONTACT_*, t, local feature index or -1)."""
     normal = (normals[polygon, 0], normals[polygon, 1], normals[polygon, 2])
@@ -339,7 +340,7 @@ def _polygon_contact(points, offsets, normals, plane_offsets, polygon, start, en
     return kind, t, local
 
 
-@njit(cache=True)
+@njit_leaf
 def _sliding_contact(points, first, count, normal, start, end, tol):
     """A segment lying in the polygon's plane: SLIDING when it overlaps the polygon grown by tol.
 
@@ -386,7 +387,7 @@ def _wrap_angle(angle):
     return angle
 
 
-@njit(cache=True)
+@njit_leaf
 def _contact_arc(points, offsets, normals, polygon, kind, local, e1, e2):
     """The directions around the segment (start angle, length) in which the face extends from the contact.
 
@@ -444,7 +445,7 @@ def _arcs_cover_circle(arc_start, arc_length, count, angle_tol):
     return _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, np.empty(2 * count))
 
 
-@njit(cache=True)
+@njit_leaf
 def _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, bounds):
     """_arcs_cover_circle with a scratch array bounds (at least 2 count,) float64 for the arcs' ends."""
     total = 0.0
@@ -546,7 +547,7 @@ def _boundary_contacts_block(points, offsets, normals, start, end, polygon, t, k
 # kernels: one segment against the BVH
 
 
-@njit(cache=True)
+@njit_leaf
 def _gather_contacts(
     points, offsets, normals, plane_offsets,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
@@ -558,7 +559,7 @@ def _gather_contacts(
     Writes at most len(out_polygon) contacts and returns how many there are; with stop_at_interior it
     returns -1 at the first INTERIOR contact; with boundary_only it keeps only EDGE and VERTEX contacts.
     """
-    direction = end - start
+    direction = (end[0] - start[0], end[1] - start[1], end[2] - start[2])
     inv = inverse_direction(direction)
     capacity = out_polygon.shape[0]
     found = 0
@@ -600,7 +601,7 @@ def _gather_contacts(
     return found
 
 
-@njit(cache=True)
+@njit_leaf
 def _sort_contacts(polygon, t, kind, local, count, same_point):
     """Sort the first `count` contacts in place by t; contacts at one point (t chained within same_point)
     by kind, then polygon, so that rounding in t never decides their order. Insertion sorts: counts are small.
@@ -623,7 +624,7 @@ def _sort_contacts(polygon, t, kind, local, count, same_point):
         group = end
 
 
-@njit(cache=True)
+@njit_leaf
 def _swap_contacts(polygon, t, kind, local, i, j):
     polygon[i], polygon[j] = polygon[j], polygon[i]
     t[i], t[j] = t[j], t[i]
@@ -631,7 +632,7 @@ def _swap_contacts(polygon, t, kind, local, i, j):
     local[i], local[j] = local[j], local[i]
 
 
-@njit(cache=True)
+@njit_leaf
 def segment_blocked(
     points, offsets, normals, plane_offsets,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,

@@ -63,6 +63,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import CancelledError, SceneError
+from ..jit import njit_leaf
 from ..raycast import CONTACT_VERTEX, _arcs_cover_circle, _contact_arc, _perpendicular_frame
 from ..scene import Scene
 from .candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_FXE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
@@ -453,7 +454,7 @@ def _norm(a):
     return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
-@njit(cache=True)
+@njit_leaf
 def _line_cell(d, n):
     """The cell of a line of direction d (3,): (face axis a, i, j, flipped). The line's canonical direction
     has a positive dominant component (the first largest); flipped tells whether that is -d."""
@@ -474,7 +475,7 @@ def _line_cell(d, n):
     return a, i, j, d[a] < 0.0
 
 
-@njit(cache=True)
+@njit_leaf
 def _clip(src, count, ca, cb, cc, dst):
     """Sutherland-Hodgman: the part of the convex polygon src[:count] (chart coordinates) where
     ca x0 + cb x1 + cc x2 >= 0, written to dst; returns its vertex count (0 when nothing is left)."""
@@ -500,7 +501,7 @@ def _clip(src, count, ca, cb, cc, dst):
     return out
 
 
-@njit(cache=True)
+@njit_leaf
 def _clip_pyramid(buf_a, count, lo_u, hi_u, lo_w, hi_w, buf_b):
     """Clip a polygon in chart coordinates (x0 along the face axis) to the cone lo_u <= x1/x0 <= hi_u,
     lo_w <= x2/x0 <= hi_w (x0 >= 0); the result ends in buf_a; returns its count."""
@@ -511,7 +512,7 @@ def _clip_pyramid(buf_a, count, lo_u, hi_u, lo_w, hi_w, buf_b):
     return count
 
 
-@njit(cache=True)
+@njit_leaf
 def _to_chart(points, count, a, sign, origin, out):
     """points[:count] - origin, times sign, in the coordinates of face axis a: (x_a, x_b, x_c)."""
     b = (a + 1) % 3
@@ -608,7 +609,7 @@ def _source_distance(q, nb, centre):
                              q[nb, 1] - centre[1], q[nb, 2] - centre[2])  # fmt: skip
 
 
-@njit(cache=True)
+@njit_leaf
 def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
     """(u0, u1, w0, w1): the box of the lines from the points q[0..nb] through polygon points[first:first+count]
     on the positive face of axis a (u0 > u1 when none crosses that face)."""
@@ -621,7 +622,8 @@ def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
             _to_chart(points[first : first + count], count, a, sign, q[k], buf_a)
             m = _clip(buf_a, count, 1.0, 0.0, 0.0, buf_b)
             for r in range(m):
-                buf_a[r] = buf_b[r]
+                for c in range(3):
+                    buf_a[r, c] = buf_b[r, c]
             m = _clip_pyramid(buf_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, buf_b)
             if m == 0:
                 continue
@@ -633,7 +635,7 @@ def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
     return u0, u1, w0, w1
 
 
-@njit(cache=True)
+@njit_leaf
 def _grid_range(u0, u1, w0, w1, n):
     """Grid corner index ranges (k0, k1, l0, l1) spanning a chart box."""
     k0 = max(0, int(np.floor((u0 + 1.0) * 0.5 * n)))
@@ -1134,7 +1136,7 @@ def _register(
     return keys, targets, sides, bits, count
 
 
-@njit(cache=True)
+@njit_leaf
 def _sub_cells(poly, count, lo_u, hi_u, lo_w, hi_w, eps, row_lo, row_hi):
     """uint64: the sub-cells of the cell [lo_u, hi_u] x [lo_w, hi_w], cut 8 x 8 (bit 8 j + i: column i, row
     j), that the central projection of the convex polygon poly[:count] (chart coordinates, x0 >= 0) touches,
@@ -1216,13 +1218,15 @@ def _group(keys, count, n_keys):
 # local visibility: is an inner generator pierced by the line?
 
 
-@njit(cache=True)
+@njit_leaf
 def _edge_pierced(e, d, vertices, edges, ef_off, ef_inward, delta):
     """Whether the faces along edge e clearly close around a line of direction d (unit) through it: two of
     them on opposite sides of the plane (e, d), each away from it by more than the angle delta. Undecided
     (a face nearly in that plane, the line nearly along e) counts as not pierced."""
-    along = vertices[edges[e, 1]] - vertices[edges[e, 0]]
-    m = _cross(along, d)
+    a = edges[e, 0]
+    b = edges[e, 1]
+    along = (vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2])
+    m = (along[1] * d[2] - along[2] * d[1], along[2] * d[0] - along[0] * d[2], along[0] * d[1] - along[1] * d[0])
     length = _norm(m)
     if length <= delta * _norm(along):
         return False
@@ -1351,7 +1355,7 @@ def _trim(out, count):
 # VV and VEE / EVE: lines through a vertex
 
 
-@njit(cache=True)
+@njit_leaf
 def _meet(o0, o1, o2, d0, d1, d2, a0, a1, a2, b0, b1, b2):
     """Where the line o + t d (d unit) passes closest to the line a + s (b - a): (ok, t, s, distance between
     the lines); ok is False when they are parallel."""
@@ -1373,7 +1377,7 @@ def _meet(o0, o1, o2, d0, d1, d2, a0, a1, a2, b0, b1, b2):
     return True, t, s, gap
 
 
-@njit(cache=True)
+@njit_leaf
 def _meets_segment(o, d, vertices, edges, normals, plane_offsets, ef_off, ef_face, f, tol, delta):
     """(ok, t): whether the line o + t d (d unit) meets edge f within tol, and where along the line.
 
@@ -1381,7 +1385,6 @@ def _meets_segment(o, d, vertices, edges, normals, plane_offsets, ef_off, ef_fac
     contact with the edge, when each face of f is either crossed that near the end or exactly parallel to the
     line (d . normal == 0, an axis-aligned line along an axis-aligned face) and within tol / 2 of its plane:
     validation sets such a face aside as one the line slides over. Such a line is refused here."""
-    # scalars, not row views: this runs for every root of every cell, and a view costs more than the arithmetic
     i = edges[f, 0]
     j = edges[f, 1]
     a0 = vertices[i, 0]
@@ -1413,7 +1416,7 @@ def _meets_segment(o, d, vertices, edges, normals, plane_offsets, ef_off, ef_fac
     return True, t
 
 
-@njit(cache=True)
+@njit_leaf
 def _enters_object(is_vertex, gid, u, others, n_others, vertex_object, edge_object, object_offsets, object_polygons,
                    vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
     """Local visibility at an outer generator (seed 003 section 3.2, made safe): whether the line leaves the
@@ -1615,7 +1618,7 @@ def _vertex_candidates(
     return _trim(out, count)
 
 
-@njit(cache=True)
+@njit_leaf
 def _vee_enters(v, f, g, p, d, tf, tg, others, u, vertex_object, edge_object, object_offsets, object_polygons, vf_off,
                 vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
     """Whether an outer generator of the VEE / EVE line (through p = vertex v, edges f at tf and g at tg along
@@ -1656,7 +1659,7 @@ def _vee_enters(v, f, g, p, d, tf, tg, others, u, vertex_object, edge_object, ob
 # E4: lines through four edges, found from the inner edge of lowest id
 
 
-@njit(cache=True)
+@njit_leaf
 def _clip2(src, count, ca, cb, cc, dst):
     """Sutherland-Hodgman in the (s, t) plane: the part of src[:count] where ca s + cb t + cc >= 0."""
     out = 0
@@ -1676,7 +1679,7 @@ def _clip2(src, count, ca, cb, cc, dst):
     return out
 
 
-@njit(cache=True)
+@njit_leaf
 def _curve_meets(c0, c1, c2, c3, poly, count, slack):
     """Whether c0 + c1 s + c2 t + c3 s t vanishes (within slack) on the convex polygon poly[:count] of the
     (s, t) plane. The function is harmonic, so its range over the polygon is its range over the boundary,
@@ -1769,7 +1772,7 @@ def _family_may_cross(ea, ed, h, xd, region, count, src, points, offsets, tol):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
     """The common zeros (s, t) of c0 + c1 s + c2 t + c3 s t and k0 + k1 s + k2 t + k3 s t, written to roots
     (2, 2); returns how many (0 also when the two curves coincide: infinitely many lines, no node)."""
@@ -1818,7 +1821,7 @@ def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
     return n_out
 
 
-@njit(cache=True)
+@njit_leaf
 def _along_from_s(h, xd, y_rel, yd, ed, margin, delta, out):
     """For the lines E(s) X(t) meeting edge y (E(s) = e_a + s ed, X(t) = e_a + h + t xd, y from e_a + y_rel
     along yd): the point Y(u) = e_a + y_rel + u yd where the line through E(s) meets y is a Moebius function
@@ -1854,7 +1857,7 @@ def _along_from_s(h, xd, y_rel, yd, ed, margin, delta, out):
     out[5] = 1.0 + reach
 
 
-@njit(cache=True)
+@njit_leaf
 def _far_past_ends(moebius, s):
     """Whether the line of the family through E(s) meets y outside its u range (see _along_from_s), without
     a division; False when the range is unbounded or the map has its pole at s."""
@@ -1869,7 +1872,7 @@ def _far_past_ends(moebius, s):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, vec):
     """The k-th bounding plane of a cell's cone (chart axis a) applied to vec (3,): >= 0 inside."""
     b = (a + 1) % 3
@@ -2376,7 +2379,7 @@ def _crossing_candidates(
     return _trim(out, count)
 
 
-@njit(cache=True)
+@njit_leaf
 def _share_vertex(edges, f, g):
     return edges[f, 0] == edges[g, 0] or edges[f, 0] == edges[g, 1] or edges[f, 1] == edges[g, 0] or \
         edges[f, 1] == edges[g, 1]  # fmt: skip

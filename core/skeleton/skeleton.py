@@ -25,6 +25,7 @@ from numba import njit
 from ..bvh import build_bvh
 from ..errors import CancelledError, SceneError, VisradError
 from ..formfactor import clip_to_hemisphere, lambert_sum
+from ..jit import njit_leaf
 from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular_frame, first_hits
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
@@ -880,7 +881,7 @@ def _pair_rows(lo, hi, bucket, second, pair, first, distinct, offsets):
                 pair += 1
 
 
-@njit(cache=True)
+@njit_leaf
 def _arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, touched, found):
     """The (surface, surface) pairs arc `arc` joins, each once as (lower, higher), into found (2, K); returns
     K. The surfaces touched at each end are the ones its lines end on (as found at either node, ends (A, 2,
@@ -911,7 +912,7 @@ def _arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_f
     return n
 
 
-@njit(cache=True)
+@njit_leaf
 def _touched(code, end_at_start, end_at_end, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, out):
     """The surfaces an arc's lines touch beyond generator `code`, into out; returns how many."""
     count = 0
@@ -927,7 +928,7 @@ def _touched(code, end_at_start, end_at_end, n_vertices, vf_off, vf_face, ef_off
     return count
 
 
-@njit(cache=True)
+@njit_leaf
 def _add_unique(values, count, value):
     for i in range(count):
         if values[i] == value:

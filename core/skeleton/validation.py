@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from ..bvh import STACK_SIZE
+from ..jit import njit_leaf
 from ..raycast import (
     CONTACT_EDGE,
     CONTACT_INTERIOR,
@@ -235,7 +236,7 @@ def _clip_line(origin, direction, lo, hi):
     return t0, t1
 
 
-@njit(cache=True)
+@njit_leaf
 def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, direction, angle_tol, arc_start, arc_len,
                    bounds):  # fmt: skip
     """Whether contacts lo..hi-1 of (polys, kinds, locals_), at one point, close around a line of the given
@@ -269,7 +270,7 @@ def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, dire
     return _arcs_cover_circle_with(arc_start, arc_len, members, angle_tol, bounds)
 
 
-@njit(cache=True)
+@njit_leaf
 def _displaced_hit(points, offsets, normals, poly, kind, local, delta, u, angle_tol, margin=_SIDE_EPS):
     """First-order test: does the line displaced by the 3-vector `delta` (perpendicular to u) cross the polygon
     at the contact? Returns (hit, shift) where shift is how far along u the crossing moves (to order contacts).
@@ -307,7 +308,7 @@ def _displaced_hit(points, offsets, normals, poly, kind, local, delta, u, angle_
     return True, shift
 
 
-@njit(cache=True)
+@njit_leaf
 def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
     """(tau_in, tau_out): where the line start + tau u (tau in [0, length]), lying in the polygon's plane,
     overlaps the polygon; tau_in > tau_out when it does not."""
@@ -333,7 +334,7 @@ def _sliding_interval(points, offsets, normals, poly, start, u, length, tol):
     return lo, hi
 
 
-@njit(cache=True)
+@njit_leaf
 def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol, corners):
     """Whether `point` (in the polygon's plane) moved by a small multiple of `delta` (in that plane) lies
     strictly inside the polygon: inside by more than tol from every side, or on a side and moving inwards from
@@ -358,7 +359,7 @@ def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol, co
     return True
 
 
-@njit(cache=True)
+@njit_leaf
 def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
                 lo, hi, diag, angle_tol, tol):  # fmt: skip
     """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
@@ -387,7 +388,7 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _solve4(a, b, x):
     """Solve the 4x4 system a x = b by Gaussian elimination with partial pivoting, in place: a (4, 4) and b (4,)
     float64 are overwritten, x (4,) float64 receives the solution. Returns whether the system is regular."""
@@ -435,7 +436,7 @@ def _edge_direction(vertices, edges, e, away_from):
     return _over(d, np.sqrt(_dot(d, d)))
 
 
-@njit(cache=True)
+@njit_leaf
 def _is_incident_face(poly, kind, gid, vf_off, vf_face, ef_off, ef_face):
     if kind == GEN_VERTEX:
         for i in range(vf_off[gid], vf_off[gid + 1]):
@@ -448,7 +449,7 @@ def _is_incident_face(poly, kind, gid, vf_off, vf_face, ef_off, ef_face):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _generator_blocked(
     points, offsets, normals, kind, gid, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
     direction, angle_tol, polys, kinds, locals_, arc_start, arc_len, bounds,
@@ -472,7 +473,7 @@ def _generator_blocked(
     )
 
 
-@njit(cache=True)
+@njit_leaf
 def _meets_first(normals, areas, poly, key, best, best_key, travel):
     """Whether a line travelling along `travel` (3-vector) meets polygon `poly` at position `key` before polygon
     `best` at `best_key` (best < 0: none yet). Positions within _SIDE_EPS are one point: there the face whose
@@ -491,7 +492,7 @@ def _meets_first(normals, areas, poly, key, best, best_key, travel):
     return poly < best
 
 
-@njit(cache=True)
+@njit_leaf
 def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo, hi, delta, u, angle_tol, outward):
     """Among contacts lo..hi-1 (one point), the polygon whose inside the displaced line crosses first going
     `outward` (+1 along u, -1 against); -1 when it crosses none (grazed polygons do not count: lines sliding
@@ -516,7 +517,7 @@ def _near_plane(point, normal, offset, tol):
     return abs(_dot(normal, point) + offset) <= tol
 
 
-@njit(cache=True)
+@njit_leaf
 def _parallel_edges(vertices, edges, e, f, tol):
     """Whether edge f stays within tol of a line parallel to edge e over its whole length."""
     d = _edge_direction(vertices, edges, e, -1)
@@ -526,7 +527,7 @@ def _parallel_edges(vertices, edges, e, f, tol):
     return _dot(off, off) <= tol * tol
 
 
-@njit(cache=True)
+@njit_leaf
 def _side_along(points, offsets, poly, kind, local, motion, tol):
     """The side of polygon `poly` at a contact (kind, local) that a point moving along `motion` (3-vector) from
     it stays on (within tol of the line of that motion): the edge of an edge contact, the side leaving a vertex
@@ -559,7 +560,7 @@ def _side_along(points, offsets, poly, kind, local, motion, tol):
     return -1
 
 
-@njit(cache=True)
+@njit_leaf
 def _shared_face(ef_off, ef_face, e, f):
     """Whether edges e and f bound one polygon."""
     for i in range(ef_off[e], ef_off[e + 1]):
@@ -569,7 +570,7 @@ def _shared_face(ef_off, ef_face, e, f):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
     """Whether an EEE arc's three edges share a plane, two of them are parallel or two bound one face: the
     degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events."""
@@ -605,7 +606,7 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _through_own_solid(kind_a, id_a, kind_b, id_b, element_solid, vf_off, vf_face, ef_off, ef_face):
     """Whether generators a and b belong to one convex solid and bound no common face of it: lines meeting both
     (inside the edges: an arc's lines between its nodes) run through that solid between them."""
@@ -623,7 +624,7 @@ def _through_own_solid(kind_a, id_a, kind_b, id_b, element_solid, vf_off, vf_fac
     return True
 
 
-@njit(cache=True)
+@njit_leaf
 def _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
     """(a, b), a < b: two retained edges met at one point and not parallel (crossing there: objects in contact),
     else (-1, -1)."""
@@ -650,8 +651,8 @@ def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, sc
     """_relaxed_arc of node `node` of `line` (_Line) with the retained generators (r_kind, r_id, r_group, r_pin) =
     retained, recorded at row n_inc of `incidences` (_Incidences) when the arc exists; returns the next free row.
 
-    Inlined (numba IR) where it is called, so that only _relaxed_arc is a call: numba counts a reference to
-    every array argument of every call, and the named tuples hold dozens."""
+    Inlined (numba IR) where it is called: the named tuples' dozens of arrays go to _relaxed_arc, a leaf kernel
+    (core.jit) that takes them without counting references."""
     g = geometry
     r_kind, r_id, r_group, r_pin = retained
     return _relaxed_arc(
@@ -666,7 +667,7 @@ def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, sc
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit_leaf
 def _relaxed_arc(
     points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
     face_group, object_ids, element_solid, diag, tol, angle_tol,
@@ -1179,7 +1180,7 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
     return incidences, n_inc
 
 
-@njit(cache=True)
+@njit_leaf
 def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
                          group_v, extra, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the pencils in the plane of vertex generator v's edge e_v and another object's edge `extra`
@@ -1223,7 +1224,7 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
     return n_inc
 
 
-@njit(cache=True)
+@njit_leaf
 def _faces_meet_in(geometry, e, f, point, direction, normal):
     """Whether a face of edge e and a face of edge f, both in the plane of unit `normal` and facing each other,
     both hold the points just off `point` (on both edges) along `direction` (in that plane)."""
@@ -1260,7 +1261,7 @@ def _grown(incidences, n_inc):
     return bigger
 
 
-@njit(cache=True)
+@njit_leaf
 def _generator_met(points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off,
                    ef_face, kind, gid, start, end, tol):  # fmt: skip
     """Whether the segment start-end (3,) touches generator (kind, gid): a vertex contact at that vertex or an
@@ -1284,7 +1285,7 @@ than tol along the line join one group, so only a chain of that many contacts co
 farther in to the generator's group."""
 
 
-@njit(cache=True)
+@njit_leaf
 def _pierced_between(
     points, offsets, normals, plane_offsets,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
@@ -1337,7 +1338,7 @@ def _pierced_between(
     return found < 0
 
 
-@njit(cache=True)
+@njit_leaf
 def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
     """The scene edge every contact lo..hi-1 lies on (all edge contacts of one edge), else -1."""
     edge = -1
@@ -1351,7 +1352,7 @@ def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
     return edge
 
 
-@njit(cache=True)
+@njit_leaf
 def _candidate_rows(cand_vertices, cand_edges, ve_off, c):
     """Most incidence rows candidate c records but those of _arcs_off_edge and _pencils_at_junction."""
     rows = 0
