@@ -646,13 +646,13 @@ def _partner(pair, j):
     return -1
 
 
-@njit(cache=True, inline="always")
+@njit_leaf
 def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc, node):
     """_relaxed_arc of node `node` of `line` (_Line) with the retained generators (r_kind, r_id, r_group, r_pin) =
     retained, recorded at row n_inc of `incidences` (_Incidences) when the arc exists; returns the next free row.
 
-    Inlined (numba IR) where it is called: the named tuples' dozens of arrays go to _relaxed_arc, a leaf kernel
-    (core.jit) that takes them without counting references."""
+    A leaf kernel (core.jit): the named tuples' dozens of arrays are handed on without counting references,
+    which a caller that counts them would do for each at every call."""
     g = geometry
     r_kind, r_id, r_group, r_pin = retained
     return _relaxed_arc(
