@@ -1093,7 +1093,8 @@ def _register(
                     _to_chart(quad, corners, a, sign, origin, buf_a)
                     m = _clip(buf_a, corners, 1.0, 0.0, 0.0, buf_b)
                     for r in range(m):
-                        buf_a[r] = buf_b[r]
+                        for c in range(3):
+                            buf_a[r, c] = buf_b[r, c]
                     m = _clip_pyramid(buf_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, buf_b)
                     if m == 0:
                         continue
@@ -1503,7 +1504,8 @@ def _vertex_candidates(
             side = 1 if flipped else 0
             if length > vertex_depth[v, side, cell] + margin or length > vertex_depth[w, 1 - side, cell] + margin:
                 continue
-            others[0] = vertices[w]
+            for c in range(3):
+                others[0, c] = vertices[w, c]
             if _enters_object(True, v, d, others, 1, vertex_object, edge_object, object_offsets, object_polygons,
                               vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin, delta):  # fmt: skip
                 continue
