@@ -496,6 +496,15 @@ def test_furnished_rooms_build_without_exception_or_nan():
         assert np.isfinite(arcs.s[linked]).all() and np.isnan(arcs.s[~linked]).all(), seed
 
 
+def test_arcs_seen_past_a_seam_have_both_nodes():
+    """Room 80: two boxes side by side stand on a third, their bottoms in its top's plane. The lines in that plane
+    from one's bottom corner to the seam of their collinear bottom edges (EV arcs, one per edge) end where they
+    pass the corner of the lower box's top first: that node drops its corner for each edge of the seam beyond
+    it, or the arcs of both edges are left without it (they were, until the seam's edges were all taken)."""
+    arcs = _furnished_skeleton(80).arcs
+    assert not (arcs.dangling & (arcs.kind == ARC_EV)).any()
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="arcs whose lines lie in the contact plane of stacked or side-by-side boxes (END_PLANAR: pencils "
