@@ -1339,17 +1339,25 @@ def _pierced_between(
 
 
 @njit_leaf
-def _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, lo, hi):
-    """The scene edge every contact lo..hi-1 lies on (all edge contacts of one edge), else -1."""
-    edge = -1
+def _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, lo, hi, tol, out):
+    """How many scene edges contacts lo..hi-1 lie on, written to `out`, when all are edge contacts of one edge
+    or of collinear edges of objects side by side (a seam: each edge bounds the arcs through it alike); else 0."""
+    count = 0
     for i in range(lo, hi):
         if c_kind[i] != CONTACT_EDGE:
-            return -1
+            return 0
         e = corner_edge[offsets[c_poly[i]] + c_local[i]]
-        if edge >= 0 and e != edge:
-            return -1
-        edge = e
-    return edge
+        seen = False
+        for k in range(count):
+            if out[k] == e:
+                seen = True
+        if seen:
+            continue
+        if count > 0 and not _parallel_edges(vertices, edges, out[0], e, tol):
+            return 0
+        out[count] = e
+        count += 1
+    return count
 
 
 @njit_leaf
@@ -1404,6 +1412,7 @@ def _validate_chunk(
 
     capacity = 256
     c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
+    extras = np.empty(capacity, dtype=np.int64)
     stack = np.empty(STACK_SIZE, dtype=np.int64)
     max_faces = 0
     for v in range(n_vertices):
@@ -1497,6 +1506,7 @@ def _validate_chunk(
                 break
             capacity = 2 * found
             c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
+            extras = np.empty(capacity, dtype=np.int64)
             scratch = _new_scratch(capacity + max_faces)
             arc_start = scratch.arc_start
             arc_len = scratch.arc_len
@@ -1689,60 +1699,73 @@ def _validate_chunk(
             if ng > 3:
                 break
             g = first - 1 if side == 0 else last + 1
-            extra = -1
+            n_extra = 0
             while 0 <= g < n_groups:
-                e = _single_edge(offsets, corner_edge, c_poly, c_kind, c_local, g_lo[g], g_hi[g])
-                if e >= 0 and edge_mask[e]:
-                    extra = e
+                n_extra = _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, g_lo[g], g_hi[g],
+                                      tol, extras)  # fmt: skip
+                masked = False
+                for x in range(n_extra):
+                    masked = masked or edge_mask[extras[x]]
+                if masked:
                     break
+                n_extra = 0
                 if _group_blocked(
                     points, offsets, normals, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, angle_tol,
                     arc_start, arc_len, bounds,
                 ):  # fmt: skip
                     break
                 g = g - 1 if side == 0 else g + 1
-            if extra < 0:
-                continue
-            for j in range(ng):
-                if gk[j] != GEN_VERTEX:
+            for x in range(n_extra):
+                extra = extras[x]
+                if not edge_mask[extra]:
                     continue
-                n_retained = 0
-                norm = -1
-                for k in range(ng + 1):
-                    if k == j:
+                # the rows bounded per candidate cover one edge; a seam of several needs more
+                need = 4
+                if ng == 2:
+                    need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
+                while n_inc + need > incidences.node.shape[0]:
+                    incidences = _grown(incidences, n_inc)
+                for j in range(ng):
+                    if gk[j] != GEN_VERTEX:
                         continue
-                    r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
-                    r_id[n_retained] = gid[k] if k < ng else extra
-                    r_group[n_retained] = gg[k] if k < ng else g
-                    if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
-                        norm = n_retained
-                    n_retained += 1
-                norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
-                for sigma in (1.0, -1.0):
-                    n_inc = _relax(
-                        geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
-                    )
-            # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
-            # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
-            # from it, the second's must follow into its edge from its vertex
-            if ng != 2:
-                continue
-            for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
-                e_slide = ve_edge[slot]
-                if not edge_mask[e_slide] or e_slide == extra:
+                    n_retained = 0
+                    norm = -1
+                    for k in range(ng + 1):
+                        if k == j:
+                            continue
+                        r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
+                        r_id[n_retained] = gid[k] if k < ng else extra
+                        r_group[n_retained] = gg[k] if k < ng else g
+                        if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
+                            norm = n_retained
+                        n_retained += 1
+                    norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                    for sigma in (1.0, -1.0):
+                        n_inc = _relax(
+                            geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
+                            node,
+                        )  # fmt: skip
+                # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
+                # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
+                # from it, the second's must follow into its edge from its vertex
+                if ng != 2:
                     continue
-                for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
-                    e_pin = ve_edge[other]
-                    if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
+                for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
+                    e_slide = ve_edge[slot]
+                    if not edge_mask[e_slide] or e_slide == extra:
                         continue
-                    r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
-                    r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
-                    r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
-                    norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
-                    n_inc = _relax(
-                        geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
-                    )
-                    r_pin[1] = -1
+                    for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
+                        e_pin = ve_edge[other]
+                        if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
+                            continue
+                        r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
+                        r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
+                        r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
+                        norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
+                        n_inc = _relax(
+                            geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
+                        )
+                        r_pin[1] = -1
 
         # an FXE node ends the EEE swath of the lines through its crossing point meeting its third edge: all
         # three generators are kept and the contact on the third edge slides either way
