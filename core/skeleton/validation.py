@@ -1539,16 +1539,22 @@ def _validate_chunk(
                 n_groups += 1
             g_hi[n_groups - 1] = i + 1
 
-        missing = False
+        # each generator's group: the last one holding a contact with it (one pass over the contacts)
         for j in range(ng):
             gg[j] = -1
-            for g in range(n_groups):
-                for i in range(g_lo[g], g_hi[g]):
-                    base = offsets[c_poly[i]] + c_local[i]
-                    if gk[j] == GEN_VERTEX and c_kind[i] == CONTACT_VERTEX and corner_vertex[base] == gid[j]:
+        for g in range(n_groups):
+            for i in range(g_lo[g], g_hi[g]):
+                kind = c_kind[i]
+                if kind != CONTACT_VERTEX and kind != CONTACT_EDGE:
+                    continue
+                base = offsets[c_poly[i]] + c_local[i]
+                element = corner_vertex[base] if kind == CONTACT_VERTEX else corner_edge[base]
+                wanted = GEN_VERTEX if kind == CONTACT_VERTEX else GEN_EDGE
+                for j in range(ng):
+                    if gk[j] == wanted and gid[j] == element:
                         gg[j] = g
-                    elif gk[j] == GEN_EDGE and c_kind[i] == CONTACT_EDGE and corner_edge[base] == gid[j]:
-                        gg[j] = g
+        missing = False
+        for j in range(ng):
             if gg[j] < 0:
                 missing = True
         if missing:
