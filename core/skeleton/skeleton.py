@@ -42,6 +42,7 @@ from .validation import (
     WORKERS,
     IncidenceChunk,
     NodeChunk,
+    element_solids,
     validate_candidates,
 )
 
@@ -146,6 +147,7 @@ class Skeleton:
         incidence_parts: list[IncidenceChunk] = []
         n_nodes = self._n_nodes
         rejected = np.zeros_like(self.rejected)
+        element_solid = element_solids(self.scene, self.topology)
         for candidates, fraction in iter_candidates(
             self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
             cancel=cancel,
@@ -155,7 +157,7 @@ class Skeleton:
             if len(built):
                 candidates = _not_through(self.scene, candidates, built)
             nodes, incidences, counters = validate_candidates(
-                self.scene, self.topology, self.bvh, candidates, self.edge_mask
+                self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid
             )
             rejected += counters
             node_parts.append(nodes)

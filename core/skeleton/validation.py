@@ -95,6 +95,10 @@ WORKERS = max(1, min(2, os.cpu_count() or 1))
 _MIN_SLICE = 2_000
 """Fewest candidates worth a thread of their own."""
 
+_SLICES_PER_WORKER = 4
+"""Slices of a chunk per thread: slices of equal counts take unequal times (a vertex pair's line has more arcs
+than an edge quadruple's), and a thread done early takes the next slice instead of waiting."""
+
 _CONTACT_LENGTHS = 1e3
 """A line meeting two touching faces over fewer tolerance lengths than this only passes a corner of their
 contact (the tolerant overlap of a line with a polygon it touches at a corner is a few tolerance lengths
@@ -117,7 +121,7 @@ _Geometry = namedtuple(
 int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
 vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
 int64); face_group and object_ids (F,) int64; element_solid (V + E,) int64 the closed convex object all faces of
-each vertex, then each edge, belong to (-1: none, see _element_solids); the scene's diagonal, tol.length and
+each vertex, then each edge, belong to (-1: none, see element_solids); the scene's diagonal, tol.length and
 tol.cosine (floats)."""
 
 _Line = namedtuple(
@@ -1848,23 +1852,25 @@ def _validate_chunk(
     )  # fmt: skip
 
 
-def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS):
+def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS, element_solid=None):
     """Cast every candidate line; return (NodeChunk, IncidenceChunk, counters (N_COUNTERS,) int64).
 
     scene: core.scene.Scene; topology: core.skeleton.topology.Topology; bvh: core.bvh.BVH of the scene;
     candidates: NodeCandidates; edge_mask (E,) bool: the edges a vertex generator may slide along.
     workers: threads casting consecutive slices of the candidates at once (the kernel releases the GIL); the
-    result is the same for any number, in candidate order.
+    result is the same for any number, in candidate order. element_solid: element_solids(scene, topology), for
+    a caller validating many chunks of one scene (computed here when None).
     """
     n = len(candidates.kind)
-    element_solid = _element_solids(scene, topology)
-    parts = max(1, min(int(workers), n // _MIN_SLICE))
+    if element_solid is None:
+        element_solid = element_solids(scene, topology)
+    parts = max(1, min(_SLICES_PER_WORKER * int(workers), n // _MIN_SLICE))
     bounds = np.linspace(0, n, parts + 1).astype(np.int64)
     slices = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     if parts == 1:
         results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 0, n)]
     else:
-        with ThreadPoolExecutor(parts) as pool:
+        with ThreadPoolExecutor(min(parts, int(workers))) as pool:
             results = list(
                 pool.map(
                     lambda b: _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, *b), slices
@@ -1889,7 +1895,7 @@ def _stacked(chunk_type, parts):
     return chunk_type(*(np.concatenate(arrays) for arrays in zip(*columns, strict=True)))
 
 
-def _element_solids(scene, topology) -> np.ndarray:
+def element_solids(scene, topology) -> np.ndarray:
     """(V + E,) int64 for each vertex, then each edge, the object all its faces belong to when that object is a
     closed convex solid (every edge between two of its faces, no vertex of it in front of one of its face planes
     beyond tol.length, outward normals: Scene.solid), else -1. Inside such an object, a segment between two
@@ -1933,7 +1939,7 @@ def _common_value(values: np.ndarray, offsets: np.ndarray, faces: np.ndarray) ->
 
 def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, lo: int, hi: int):
     """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice); element_solid:
-    _element_solids(scene, topology)."""
+    element_solids(scene, topology)."""
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
