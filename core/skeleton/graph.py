@@ -115,7 +115,9 @@ def _maybe_near(keys: np.ndarray, bound: float) -> np.ndarray:
     """Sorted (S,) int64: the keys (K, 6) float64 that may have another key closer than bound. Keys that
     close project within |_PROJECTION| bound of each other (plus rounding), so the others have no neighbour
     in projection order within that much: they are left out."""
-    projection = keys @ _PROJECTION
+    # einsum's own loop, not BLAS: a BLAS product this large wakes OpenBLAS's threads, which then spin for
+    # tens of milliseconds on the cores the build runs on
+    projection = np.einsum("ij,j->i", keys, _PROJECTION)
     order = np.argsort(projection)
     largest = max(float(keys.max(initial=0.0)), -float(keys.min(initial=0.0)))
     width = np.linalg.norm(_PROJECTION) * bound * (1.0 + 1e-6) + 64.0 * np.finfo(float).eps * (
