@@ -369,22 +369,10 @@ class Skeleton:
 
     def _arc_line(self, arc: int, s: float) -> tuple[np.ndarray, np.ndarray]:
         """A point (3,) and direction (3,) of the arc's line at parameter s."""
-        scene = self.scene
-        codes = [int(c) for c in self.arcs.codes[arc] if c >= 0]
-        nv = scene.n_vertices
-        edges = sorted(c - nv for c in codes if c >= nv)
-        param = edges[0]
-        a, b = scene.vertices[scene.edges[param]]
-        point = a + s * (b - a)
-        others = [c for c in codes if c != param + nv]
-        if self.arcs.kind[arc] == ARC_EV:
-            vertex = scene.vertices[others[0]]
-            return vertex, point - vertex
-        normals = []
-        for c in others:
-            p, q = scene.vertices[scene.edges[c - nv]]
-            normals.append(np.cross(p - point, q - point))
-        return point, np.cross(normals[0], normals[1])
+        point, direction = _arc_line_at(
+            self.arcs.kind[arc], self.arcs.codes[arc], s, self.scene.vertices, self.scene.edges, self.scene.n_vertices
+        )
+        return np.array(point), np.array(direction)
 
     def _trace(self, arc: int, normal: np.ndarray, offset: float) -> np.ndarray:
         """(k, 2, 3) float64 segments, k >= 0: where the arc's lines meet the plane normal . x + offset = 0.
@@ -392,43 +380,15 @@ class Skeleton:
         Only the lines meeting the plane inside the scene's bounding box grown by its diagonal are traced: a
         line parallel to the plane (an arc ending at a node whose line slides in the receiver's plane) meets
         it nowhere or at infinity, and every point a receiver can use lies in the box. The arc's range is cut
-        down to those lines by bisection from each end; an arc with none of them traces nothing."""
-        s0, s1 = self.arcs.s[arc]
+        down to those lines by bisection from each end; an arc with none of them traces nothing. EEE traces are
+        cut in halves until each piece's middle lies within tol.curve of its chord (at most _TRACE_SAMPLES
+        points)."""
         scene = self.scene
-        lo = scene.bbox_min - scene.diagonal
-        hi = scene.bbox_max + scene.diagonal
-
-        def hit(s):
-            point, direction = self._arc_line(arc, s)
-            rate = normal @ direction
-            if abs(rate) <= scene.tol.cosine * np.linalg.norm(direction):
-                return None
-            x = point - (normal @ point + offset) / rate * direction
-            return x if ((x >= lo) & (x <= hi)).all() else None
-
-        middle = 0.5 * (s0 + s1)
-        if hit(middle) is None:
-            return np.empty((0, 2, 3))
-        s0 = _last_hit(hit, middle, s0)
-        s1 = _last_hit(hit, middle, s1)
-        if self.arcs.kind[arc] == ARC_EV:
-            return np.stack([hit(s0), hit(s1)])[None]
-        samples = [(s0, hit(s0)), (s1, hit(s1))]
-        limit = scene.tol.curve
-        i = 0
-        while i < len(samples) - 1 and len(samples) < 4096:
-            (sa, pa), (sb, pb) = samples[i], samples[i + 1]
-            sm = 0.5 * (sa + sb)
-            pm = hit(sm)
-            chord = pb - pa
-            length2 = chord @ chord
-            t = 0.0 if length2 == 0.0 else np.clip((pm - pa) @ chord / length2, 0.0, 1.0)
-            if np.linalg.norm(pa + t * chord - pm) > limit:
-                samples.insert(i + 1, (sm, pm))
-            else:
-                i += 1
-        points = np.array([p for _, p in samples])
-        return np.stack([points[:-1], points[1:]], axis=1)
+        return _traced(
+            self.arcs.kind[arc], self.arcs.codes[arc], self.arcs.s[arc, 0], self.arcs.s[arc, 1], scene.vertices,
+            scene.edges, scene.n_vertices, np.asarray(normal, dtype=np.float64), float(offset),
+            scene.bbox_min - scene.diagonal, scene.bbox_max + scene.diagonal, scene.tol.cosine, scene.tol.curve,
+        )  # fmt: skip
 
     def visible_boundary(self, vertex: int, source: int) -> list[np.ndarray]:
         """The part of `source`'s surface seen from scene vertex `vertex` as closed loops (K, 3) float64 on its
@@ -987,20 +947,133 @@ def _lines_meet_polygons(points, offsets, normals, plane_offsets, polygons, orig
     return result
 
 
-def _last_hit(hit, inside: float, outside: float) -> float:
-    """The parameter nearest `outside` on the way from `inside` (hit(inside) is a point) whose hit is still a
-    point: `outside` itself when it hits, else found by bisection (64 halvings reach float64 resolution)."""
-    if hit(outside) is not None:
+#: most points of an EEE trace
+_TRACE_SAMPLES = 4096
+
+
+@njit_leaf
+def _arc_line_at(kind, codes, s, vertices, edges, n_vertices):
+    """A point and a direction (3-tuples) of the line of an arc (kind, codes (3,) of Arcs) at parameter s on
+    its lowest edge: from the vertex for EV, the meet of the planes through the point and each other edge
+    for EEE."""
+    param = -1
+    for c in codes:
+        if c >= n_vertices and (param < 0 or c - n_vertices < param):
+            param = c - n_vertices
+    a = edges[param, 0]
+    b = edges[param, 1]
+    point = (
+        vertices[a, 0] + s * (vertices[b, 0] - vertices[a, 0]),
+        vertices[a, 1] + s * (vertices[b, 1] - vertices[a, 1]),
+        vertices[a, 2] + s * (vertices[b, 2] - vertices[a, 2]),
+    )
+    if kind == ARC_EV:
+        v = codes[0] if codes[0] < n_vertices else codes[1]
+        apex = (vertices[v, 0], vertices[v, 1], vertices[v, 2])
+        return apex, (point[0] - apex[0], point[1] - apex[1], point[2] - apex[2])
+    first = (0.0, 0.0, 0.0)
+    second = (0.0, 0.0, 0.0)
+    found = 0
+    for c in codes:
+        if c < 0 or c == param + n_vertices:
+            continue
+        p = edges[c - n_vertices, 0]
+        q = edges[c - n_vertices, 1]
+        to_p = (vertices[p, 0] - point[0], vertices[p, 1] - point[1], vertices[p, 2] - point[2])
+        to_q = (vertices[q, 0] - point[0], vertices[q, 1] - point[1], vertices[q, 2] - point[2])
+        plane = _cross3(to_p, to_q)
+        if found == 0:
+            first = plane
+        else:
+            second = plane
+        found += 1
+    return point, _cross3(first, second)
+
+
+@njit_leaf
+def _cross3(a, b):
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@njit_leaf
+def _plane_hit(kind, codes, s, vertices, edges, n_vertices, normal, offset, lo, hi, cosine):
+    """(hit, point 3-tuple): where the arc's line at s meets the plane normal . x + offset = 0, hit False when
+    the line is parallel to it (within cosine) or meets it outside the box lo, hi (3,)."""
+    point, direction = _arc_line_at(kind, codes, s, vertices, edges, n_vertices)
+    rate = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
+    length = np.sqrt(direction[0] * direction[0] + direction[1] * direction[1] + direction[2] * direction[2])
+    if abs(rate) <= cosine * length:
+        return False, point
+    step = (normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2] + offset) / rate
+    x = (point[0] - step * direction[0], point[1] - step * direction[1], point[2] - step * direction[2])
+    for c in range(3):
+        if not lo[c] <= x[c] <= hi[c]:
+            return False, x
+    return True, x
+
+
+@njit_leaf
+def _last_hit(kind, codes, inside, outside, vertices, edges, n_vertices, normal, offset, lo, hi, cosine):
+    """The parameter nearest `outside` on the way from `inside` (whose line hits the plane) whose line still
+    hits: `outside` itself when it does, else found by bisection (64 halvings reach float64 resolution)."""
+    if _plane_hit(kind, codes, outside, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)[0]:
         return outside
     for _ in range(64):
         middle = 0.5 * (inside + outside)
-        if middle in (inside, outside):
+        if middle == inside or middle == outside:
             break
-        if hit(middle) is None:
-            outside = middle
-        else:
+        if _plane_hit(kind, codes, middle, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)[0]:
             inside = middle
+        else:
+            outside = middle
     return inside
+
+
+@njit(cache=True)
+def _traced(kind, codes, s0, s1, vertices, edges, n_vertices, normal, offset, lo, hi, cosine, curve):
+    """Skeleton._trace of the arc (kind, codes (3,), parameter range s0, s1): (k, 2, 3) float64."""
+    middle = 0.5 * (s0 + s1)
+    if not _plane_hit(kind, codes, middle, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)[0]:
+        return np.empty((0, 2, 3))
+    s0 = _last_hit(kind, codes, middle, s0, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)
+    s1 = _last_hit(kind, codes, middle, s1, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)
+    capacity = 2 if kind == ARC_EV else _TRACE_SAMPLES
+    params = np.empty(capacity)
+    points = np.empty((capacity, 3))
+    for k, s in enumerate((s0, s1)):
+        params[k] = s
+        x = _plane_hit(kind, codes, s, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)[1]
+        for c in range(3):
+            points[k, c] = x[c]
+    count = 2
+    i = 0
+    # each piece is halved until its middle lies within `curve` of its chord, left pieces first
+    while kind != ARC_EV and i < count - 1 and count < capacity:
+        sm = 0.5 * (params[i] + params[i + 1])
+        pm = _plane_hit(kind, codes, sm, vertices, edges, n_vertices, normal, offset, lo, hi, cosine)[1]
+        chord = (points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1], points[i + 1, 2] - points[i, 2])
+        length2 = chord[0] * chord[0] + chord[1] * chord[1] + chord[2] * chord[2]
+        t = 0.0
+        if length2 != 0.0:
+            t = ((pm[0] - points[i, 0]) * chord[0] + (pm[1] - points[i, 1]) * chord[1]
+                 + (pm[2] - points[i, 2]) * chord[2]) / length2  # fmt: skip
+            t = min(max(t, 0.0), 1.0)
+        gap = 0.0
+        for c in range(3):
+            gap += (points[i, c] + t * chord[c] - pm[c]) ** 2
+        if np.sqrt(gap) > curve:
+            params[i + 2 : count + 1] = params[i + 1 : count].copy()
+            points[i + 2 : count + 1] = points[i + 1 : count].copy()
+            params[i + 1] = sm
+            for c in range(3):
+                points[i + 1, c] = pm[c]
+            count += 1
+        else:
+            i += 1
+    segments = np.empty((count - 1, 2, 3))
+    segments[:, 0] = points[: count - 1]
+    segments[:, 1] = points[1:count]
+    return segments
 
 
 def _onto_plane(apex: np.ndarray, through: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
