@@ -114,15 +114,15 @@ _SIDE_EPS = 1e-9
 
 _Geometry = namedtuple(
     "_Geometry",
-    "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local face_group "
-    "object_ids element_solid diag tol angle_tol",
+    "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local corner_edge "
+    "face_group object_ids element_solid diag tol angle_tol",
 )
 """The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
 int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
 vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
-int64); face_group and object_ids (F,) int64; element_solid (V + E,) int64 the closed convex object all faces of
-each vertex, then each edge, belong to (-1: none, see element_solids); the scene's diagonal, tol.length and
-tol.cosine (floats)."""
+int64); corner_edge (P,) int64 the edge from each polygon corner to the next; face_group and object_ids (F,)
+int64; element_solid (V + E,) int64 the closed convex object all faces of each vertex, then each edge, belong to
+(-1: none, see element_solids); the scene's diagonal, tol.length and tol.cosine (floats)."""
 
 _Line = namedtuple(
     "_Line", "c_poly c_kind c_local g_lo g_hi g_tau n_groups sl_poly sl_a sl_b n_sliding start u f1 f2"
@@ -1139,8 +1139,8 @@ def _relaxed_arc(
 
 
 @njit(cache=True)
-def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, corner_edge, v, e_v, tau_v,
-                   group_v, tau_w, gk, gid, ng):  # fmt: skip
+def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
+                   tau_w, gk, gid, ng):  # fmt: skip
     """The EV arcs of vertex generator v (at tau_v, group group_v of the node's line) and each masked edge of
     another object crossing the line where it runs along v's edge e_v (up to its other end, at tau_w): the lines
     through v meeting that edge lie in the plane of both edges and turn at this line from one side of e_v to
@@ -1150,6 +1150,7 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
     g_ = geometry
     edges = g_.edges
     offsets = g_.offsets
+    corner_edge = g_.corner_edge
     lo_tau = min(tau_v, tau_w) + g_.tol
     hi_tau = max(tau_v, tau_w) - g_.tol
     for g in range(line.n_groups):
@@ -1226,6 +1227,52 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
             n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
             r_pin[1] = -1
     return n_inc
+
+
+@njit(cache=True)
+def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone):
+    """The pencil arcs of an FXE node (generators gid in line order, groups gg, `lone` the third edge's index)
+    named by another edge of the crossing's plane that its line crosses between the third edge and the crossing
+    (the top edge of a box the line runs over to the crossing): relaxing the crossing, the contact on either
+    crossing edge slides off it while the lines keep meeting that edge. A node through a vertex of the
+    crossing edge, off the crossing, meets the same pencil with that edge among its generators, and names the
+    arc so; the lines that go on to cross the other crossing edge are rejected at both (they graze it). Returns
+    (incidences, grown when full, and the next free row)."""
+    g_ = geometry
+    vertices, edges = g_.vertices, g_.edges
+    first_pair = 1 if lone == 0 else 0
+    second_pair = 3 - lone - first_pair
+    normal = _cross(_edge_direction(vertices, edges, gid[first_pair], -1),
+                    _edge_direction(vertices, edges, gid[second_pair], -1))  # fmt: skip
+    normal_len = np.sqrt(_dot(normal, normal))
+    lo_group = min(gg[lone], gg[first_pair])
+    hi_group = max(gg[lone], gg[first_pair])
+    for g in range(lo_group + 1, hi_group):
+        for i in range(line.g_lo[g], line.g_hi[g]):
+            if line.c_kind[i] != CONTACT_EDGE:
+                continue
+            e = g_.corner_edge[g_.offsets[line.c_poly[i]] + line.c_local[i]]
+            if abs(_dot(_edge_direction(vertices, edges, e, -1), normal)) > g_.angle_tol * normal_len:
+                continue
+            # once per edge: each of its faces gives a contact
+            repeated = False
+            for earlier in range(line.g_lo[g], i):
+                if line.c_kind[earlier] == CONTACT_EDGE and \
+                        g_.corner_edge[g_.offsets[line.c_poly[earlier]] + line.c_local[earlier]] == e:  # fmt: skip
+                    repeated = True
+            if repeated:
+                continue
+            if n_inc + 4 > incidences.node.shape[0]:
+                incidences = _grown(incidences, n_inc)
+            r_kind, r_id, r_group, _ = retained
+            for sliding in (first_pair, second_pair):
+                r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[lone], gg[lone]
+                r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
+                r_kind[2], r_id[2], r_group[2] = GEN_EDGE, gid[sliding], gg[sliding]
+                norm_dir = _edge_direction(vertices, edges, gid[sliding], -1)
+                for sigma in (1.0, -1.0):
+                    n_inc = _relax(geometry, line, retained, 3, 2, norm_dir, sigma, scratch, incidences, n_inc, node)
+    return incidences, n_inc
 
 
 @njit_leaf
@@ -1389,11 +1436,11 @@ def _candidate_rows(cand_vertices, cand_edges, ve_off, c):
 
 @njit(cache=True, nogil=True)
 def _validate_chunk(
-    geometry, plane_offsets, corner_vertex, corner_edge, bvh_arrays, ve_off, ve_edge, edge_mask,
+    geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry  # fmt: skip
+     corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
@@ -1697,7 +1744,7 @@ def _validate_chunk(
                 across = _minus(offset, _scaled(u, tau_w))
                 if _dot(across, across) <= tol * tol:
                     incidences, n_inc = _arcs_off_edge(
-                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, corner_edge, v, e_v,
+                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
 
@@ -1797,6 +1844,9 @@ def _validate_chunk(
                 n_inc = _relax(
                     geometry, line, retained, 3, pair_low, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
+            incidences, n_inc = _pencils_over_plane_edges(
+                geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone
+            )
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
@@ -1943,14 +1993,14 @@ def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
-        scene.edge_faces, topology.edge_face_local, topology.face_group,
+        scene.edge_faces, topology.edge_face_local, scene.polygon_edge_ids, topology.face_group,
         np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, float(scene.diagonal),
         float(scene.tol.length),
         float(scene.tol.cosine),
     )  # fmt: skip
     grown = scene.diagonal
     result = _validate_chunk(
-        geometry, scene.plane_offsets, scene.polygon_vertex_ids, scene.polygon_edge_ids, tuple(bvh.arrays),
+        geometry, scene.plane_offsets, scene.polygon_vertex_ids, tuple(bvh.arrays),
         topology.vertex_edge_offsets, topology.vertex_edges, np.ascontiguousarray(edge_mask, dtype=np.bool_),
         candidates.kind[lo:hi], candidates.vertices[lo:hi], candidates.edges[lo:hi],
         np.ascontiguousarray(candidates.origin[lo:hi], dtype=np.float64),
