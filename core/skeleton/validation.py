@@ -1412,6 +1412,43 @@ def _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, 
 
 
 @njit_leaf
+def _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u, angle_tol):
+    """Whether the line along u (unit) through generators gk, gid (groups gg, ng of them) is a T-junction's line:
+    a vertex met inside an edge generator (a box's corner on the edge of a box beside or under it) and another
+    edge generator elsewhere, the line lying in the plane of that edge and a masked edge of the vertex. The
+    pencils of that plane about the other edge end there (_pencils_at_junction); any other line through the
+    vertex meeting the other edge meets the edge under the vertex as well, and is no node."""
+    if ng != 3:
+        return False
+    v = -1
+    for j in range(3):
+        if gk[j] == GEN_VERTEX:
+            if v >= 0:
+                return False
+            v = j
+    if v < 0:
+        return False
+    extra = -1
+    for k in range(3):
+        if k != v and gg[k] == gg[v]:
+            if extra >= 0:
+                return False
+            extra = k
+    if extra < 0 or edges[gid[extra], 0] == gid[v] or edges[gid[extra], 1] == gid[v]:
+        return False
+    along = _edge_direction(vertices, edges, gid[extra], -1)
+    for slot in range(ve_off[gid[v]], ve_off[gid[v] + 1]):
+        e_v = ve_edge[slot]
+        if not edge_mask[e_v]:
+            continue
+        normal = _cross(along, _edge_direction(vertices, edges, e_v, -1))
+        size = np.sqrt(_dot(normal, normal))
+        if size > angle_tol and abs(_dot(normal, u)) <= angle_tol * size:
+            return True
+    return False
+
+
+@njit_leaf
 def _candidate_rows(cand_vertices, cand_edges, ve_off, c):
     """Most incidence rows candidate c records but those of _arcs_off_edge and _pencils_at_junction."""
     rows = 0
@@ -1613,13 +1650,16 @@ def _validate_chunk(
             continue
         # two edges met at one point cross there (objects in contact: a box's bottom edge across the top edge
         # of the box it stands on): that point bounds the arcs along either edge like a vertex, so the line
-        # is a node; a vertex on an edge generator, or two vertices at one point, stay rejected
+        # is a node; a vertex on an edge generator, or two vertices at one point, stay rejected but on the line
+        # of a T-junction's pencils (_junction_line), which ends those pencils only
         coincident = False
         for j in range(ng):
             for k in range(j + 1, ng):
                 if gg[j] == gg[k] and not (gk[j] == GEN_EDGE and gk[k] == GEN_EDGE):
                     coincident = True
-        if coincident:
+        junction = coincident and _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u,
+                                                 angle_tol)  # fmt: skip
+        if coincident and not junction:
             counters[REJECT_COINCIDENT] += 1
             continue
         # generators in line order
@@ -1729,6 +1769,10 @@ def _validate_chunk(
                 geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j],
                 extra, gk, gid, gg, ng,
             )  # fmt: skip
+        # the other swaths through a junction's line (the lines through its vertex meeting the other edge) pass
+        # it: no node ends them there
+        if junction:
+            continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
         # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge
