@@ -1390,11 +1390,14 @@ def _pierced_between(
 
 
 @njit_leaf
-def _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, lo, hi, tol, out):
+def _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local, lo, hi, tol, out):
     """How many scene edges contacts lo..hi-1 lie on, written to `out`, when all are edge contacts of one edge
-    or of collinear edges of objects side by side (a seam: each edge bounds the arcs through it alike); else 0."""
+    or of collinear edges of objects side by side (a seam: each edge bounds the arcs through it alike), but
+    for faces met inside whose plane holds those edges (a box against a wall: its edge on the wall); else 0."""
     count = 0
     for i in range(lo, hi):
+        if c_kind[i] == CONTACT_INTERIOR:
+            continue
         if c_kind[i] != CONTACT_EDGE:
             return 0
         e = corner_edge[offsets[c_poly[i]] + c_local[i]]
@@ -1408,6 +1411,15 @@ def _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, 
             return 0
         out[count] = e
         count += 1
+    for i in range(lo, hi):
+        if c_kind[i] != CONTACT_INTERIOR:
+            continue
+        normal = _row(normals, c_poly[i])
+        corner = _row(points, offsets[c_poly[i]])
+        for k in range(count):
+            for end in range(2):
+                if abs(_dot(normal, _minus(_row(vertices, edges[out[k], end]), corner))) > tol:
+                    return 0
     return count
 
 
@@ -1446,6 +1458,17 @@ def _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng,
         if size > angle_tol and abs(_dot(normal, u)) <= angle_tol * size:
             return True
     return False
+
+
+@njit_leaf
+def _same_arc(incidences, a, b):
+    """Whether incidence rows a and b have one key: arc kind, generators and end faces."""
+    if incidences.kind[a] != incidences.kind[b]:
+        return False
+    for k in range(3):
+        if incidences.codes[a, k] != incidences.codes[b, k]:
+            return False
+    return incidences.end[a, 0] == incidences.end[b, 0] and incidences.end[a, 1] == incidences.end[b, 1]
 
 
 @njit_leaf
@@ -1802,8 +1825,8 @@ def _validate_chunk(
             g = first - 1 if side == 0 else last + 1
             n_extra = 0
             while 0 <= g < n_groups:
-                n_extra = _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, g_lo[g], g_hi[g],
-                                      tol, extras)  # fmt: skip
+                n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
+                                      g_lo[g], g_hi[g], tol, extras)  # fmt: skip
                 masked = False
                 for x in range(n_extra):
                     masked = masked or edge_mask[extras[x]]
@@ -1816,6 +1839,11 @@ def _validate_chunk(
                 ):  # fmt: skip
                     break
                 g = g - 1 if side == 0 else g + 1
+            # the edge lies on a face the line ends on (a box's edge against the wall)
+            on_face = False
+            if n_extra > 0:
+                for i in range(g_lo[g], g_hi[g]):
+                    on_face = on_face or c_kind[i] == CONTACT_INTERIOR
             for x in range(n_extra):
                 extra = extras[x]
                 if not edge_mask[extra]:
@@ -1841,11 +1869,17 @@ def _validate_chunk(
                             norm = n_retained
                         n_retained += 1
                     norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                    first_row = n_inc
                     for sigma in (1.0, -1.0):
                         n_inc = _relax(
                             geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
                             node,
                         )  # fmt: skip
+                    # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
+                    # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
+                    # one way is no arc (lines going on between touching objects)
+                    if on_face and n_inc == first_row + 2 and _same_arc(incidences, first_row, first_row + 1):
+                        n_inc = first_row
                 # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
                 # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
                 # from it, the second's must follow into its edge from its vertex
