@@ -152,6 +152,7 @@ def iter_candidates(
         steps.append(("crossing", 0, 1, 1.0))
         steps.append(("crossing plane", 0, 1, 1.0))
         steps.append(("crossing transversal", 0, 1, 1.0))
+        steps.append(("junction", 0, 1, 1.0))
     weights = np.array([(s[2] - s[1]) * s[3] for s in steps], dtype=np.float64)
     total = float(weights.sum()) if len(weights) else 1.0
 
@@ -202,6 +203,11 @@ def iter_candidates(
                 emask, g.vertices, g.edges, g.points, g.offsets, g.normals, g.plane_offsets, g.edge_out,
                 g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.vf_off, g.vf_face, g.ef_off, g.ef_face,
                 *crossings, cells, lazy, src, g.margin, g.delta, g.tol, g.angle_tol,
+            )  # fmt: skip
+        if phase == "junction":
+            return _junction_candidates(
+                vmask, emask, g.vertices, g.edges, g.ve_off, g.ve_edge, g.points, g.offsets, g.normals,
+                g.plane_offsets, g.edge_out, cells, lazy, src, g.tol, g.angle_tol,
             )  # fmt: skip
         if phase == "face":
             return _face_candidates(
@@ -2378,6 +2384,83 @@ def _crossing_candidates(
                 continue
             out = _push(out, count, CANDIDATE_VEE, v, -1, min(e, f), max(e, f), -1, -1, w, d)
             count += 1
+    return _trim(out, count)
+
+
+@njit(cache=True)
+def _junction_candidates(
+    vmask, emask, vertices, edges, ve_off, ve_edge, points, offsets, normals, plane_offsets, edge_out, n, lazy, src,
+    tol, angle_tol,
+):  # fmt: skip
+    """VEE candidates through a masked vertex v lying inside a masked edge `extra` of another element (a box's
+    corner on the edge of a box beside or under it: a T-junction) and the point P where a masked edge g strictly
+    crosses the plane of `extra` and an edge of v: the line v P, with edges (g, extra).
+
+    The lines of that plane through P meeting `extra` and v's edge turn at v P (their contact on v's edge
+    reaches v): that line ends their pencil, as an FXE line ends the pencils through a crossing of two edges'
+    interiors. v lies on `extra`, so the double wedges of _vertex_candidates propose nothing here; validation
+    takes the vertex on `extra` for the junction it is (its pencils: validation._pencils_at_junction)."""
+    out = _new_output(16)
+    count = 0
+    vertex_ids = np.flatnonzero(vmask)
+    edge_ids = np.flatnonzero(emask)
+    d = np.empty(3)
+    for v in vertex_ids:
+        w = vertices[v]
+        for extra in edge_ids:
+            if edges[extra, 0] == v or edges[extra, 1] == v:
+                continue
+            a = vertices[edges[extra, 0]]
+            b = vertices[edges[extra, 1]]
+            # v outside the edge's box grown by tol (most pairs stop here)
+            if (w[0] < min(a[0], b[0]) - tol or w[0] > max(a[0], b[0]) + tol
+                    or w[1] < min(a[1], b[1]) - tol or w[1] > max(a[1], b[1]) + tol
+                    or w[2] < min(a[2], b[2]) - tol or w[2] > max(a[2], b[2]) + tol):  # fmt: skip
+                continue
+            len_extra = _norm(b - a)
+            if len_extra <= tol:
+                continue
+            along = _dot(w - a, b - a) / len_extra
+            if not tol < along < len_extra - tol or _norm(w - a - along * (b - a) / len_extra) > tol:
+                continue
+            for slot in range(ve_off[v], ve_off[v + 1]):
+                e_v = ve_edge[slot]
+                if not emask[e_v]:
+                    continue
+                other = vertices[edges[e_v, 1] if edges[e_v, 0] == v else edges[e_v, 0]]
+                normal = _cross(b - a, other - w)
+                size = _norm(normal)
+                # v's edge along `extra` (boxes side by side) spans no plane
+                if size <= angle_tol * len_extra * _norm(other - w):
+                    continue
+                normal /= size
+                offset = -_dot(normal, w)
+                for g in edge_ids:
+                    if g == extra or edges[g, 0] == v or edges[g, 1] == v:
+                        continue
+                    w0 = vertices[edges[g, 0]]
+                    w1 = vertices[edges[g, 1]]
+                    h0 = _dot(normal, w0) + offset
+                    h1 = _dot(normal, w1) + offset
+                    if h0 * h1 >= 0.0 or abs(h0) <= tol or abs(h1) <= tol:
+                        continue
+                    share = h0 / (h0 - h1)
+                    for c in range(3):
+                        d[c] = w0[c] + share * (w1[c] - w0[c]) - w[c]
+                    length = _norm(d)
+                    if length <= tol:
+                        continue
+                    for c in range(3):
+                        d[c] /= length
+                    _, _, _, flipped = _line_cell(d, n)
+                    if flipped:
+                        for c in range(3):
+                            d[c] = -d[c]
+                    if lazy and not _line_meets(w, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
+                                                angle_tol):  # fmt: skip
+                        continue
+                    out = _push(out, count, CANDIDATE_VEE, v, -1, min(g, extra), max(g, extra), -1, -1, w, d)
+                    count += 1
     return _trim(out, count)
 
 

@@ -114,15 +114,15 @@ _SIDE_EPS = 1e-9
 
 _Geometry = namedtuple(
     "_Geometry",
-    "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local face_group "
-    "object_ids element_solid diag tol angle_tol",
+    "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local corner_edge "
+    "face_group object_ids element_solid diag tol angle_tol",
 )
 """The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
 int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
 vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
-int64); face_group and object_ids (F,) int64; element_solid (V + E,) int64 the closed convex object all faces of
-each vertex, then each edge, belong to (-1: none, see element_solids); the scene's diagonal, tol.length and
-tol.cosine (floats)."""
+int64); corner_edge (P,) int64 the edge from each polygon corner to the next; face_group and object_ids (F,)
+int64; element_solid (V + E,) int64 the closed convex object all faces of each vertex, then each edge, belong to
+(-1: none, see element_solids); the scene's diagonal, tol.length and tol.cosine (floats)."""
 
 _Line = namedtuple(
     "_Line", "c_poly c_kind c_local g_lo g_hi g_tau n_groups sl_poly sl_a sl_b n_sliding start u f1 f2"
@@ -1139,8 +1139,8 @@ def _relaxed_arc(
 
 
 @njit(cache=True)
-def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, corner_edge, v, e_v, tau_v,
-                   group_v, tau_w, gk, gid, ng):  # fmt: skip
+def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
+                   tau_w, gk, gid, ng):  # fmt: skip
     """The EV arcs of vertex generator v (at tau_v, group group_v of the node's line) and each masked edge of
     another object crossing the line where it runs along v's edge e_v (up to its other end, at tau_w): the lines
     through v meeting that edge lie in the plane of both edges and turn at this line from one side of e_v to
@@ -1150,6 +1150,7 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
     g_ = geometry
     edges = g_.edges
     offsets = g_.offsets
+    corner_edge = g_.corner_edge
     lo_tau = min(tau_v, tau_w) + g_.tol
     hi_tau = max(tau_v, tau_w) - g_.tol
     for g in range(line.n_groups):
@@ -1226,6 +1227,52 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
             n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
             r_pin[1] = -1
     return n_inc
+
+
+@njit(cache=True)
+def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone):
+    """The pencil arcs of an FXE node (generators gid in line order, groups gg, `lone` the third edge's index)
+    named by another edge of the crossing's plane that its line crosses between the third edge and the crossing
+    (the top edge of a box the line runs over to the crossing): relaxing the crossing, the contact on either
+    crossing edge slides off it while the lines keep meeting that edge. A node through a vertex of the
+    crossing edge, off the crossing, meets the same pencil with that edge among its generators, and names the
+    arc so; the lines that go on to cross the other crossing edge are rejected at both (they graze it). Returns
+    (incidences, grown when full, and the next free row)."""
+    g_ = geometry
+    vertices, edges = g_.vertices, g_.edges
+    first_pair = 1 if lone == 0 else 0
+    second_pair = 3 - lone - first_pair
+    normal = _cross(_edge_direction(vertices, edges, gid[first_pair], -1),
+                    _edge_direction(vertices, edges, gid[second_pair], -1))  # fmt: skip
+    normal_len = np.sqrt(_dot(normal, normal))
+    lo_group = min(gg[lone], gg[first_pair])
+    hi_group = max(gg[lone], gg[first_pair])
+    for g in range(lo_group + 1, hi_group):
+        for i in range(line.g_lo[g], line.g_hi[g]):
+            if line.c_kind[i] != CONTACT_EDGE:
+                continue
+            e = g_.corner_edge[g_.offsets[line.c_poly[i]] + line.c_local[i]]
+            if abs(_dot(_edge_direction(vertices, edges, e, -1), normal)) > g_.angle_tol * normal_len:
+                continue
+            # once per edge: each of its faces gives a contact
+            repeated = False
+            for earlier in range(line.g_lo[g], i):
+                if line.c_kind[earlier] == CONTACT_EDGE and \
+                        g_.corner_edge[g_.offsets[line.c_poly[earlier]] + line.c_local[earlier]] == e:  # fmt: skip
+                    repeated = True
+            if repeated:
+                continue
+            if n_inc + 4 > incidences.node.shape[0]:
+                incidences = _grown(incidences, n_inc)
+            r_kind, r_id, r_group, _ = retained
+            for sliding in (first_pair, second_pair):
+                r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[lone], gg[lone]
+                r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
+                r_kind[2], r_id[2], r_group[2] = GEN_EDGE, gid[sliding], gg[sliding]
+                norm_dir = _edge_direction(vertices, edges, gid[sliding], -1)
+                for sigma in (1.0, -1.0):
+                    n_inc = _relax(geometry, line, retained, 3, 2, norm_dir, sigma, scratch, incidences, n_inc, node)
+    return incidences, n_inc
 
 
 @njit_leaf
@@ -1343,11 +1390,14 @@ def _pierced_between(
 
 
 @njit_leaf
-def _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, lo, hi, tol, out):
+def _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local, lo, hi, tol, out):
     """How many scene edges contacts lo..hi-1 lie on, written to `out`, when all are edge contacts of one edge
-    or of collinear edges of objects side by side (a seam: each edge bounds the arcs through it alike); else 0."""
+    or of collinear edges of objects side by side (a seam: each edge bounds the arcs through it alike), but
+    for faces met inside whose plane holds those edges (a box against a wall: its edge on the wall); else 0."""
     count = 0
     for i in range(lo, hi):
+        if c_kind[i] == CONTACT_INTERIOR:
+            continue
         if c_kind[i] != CONTACT_EDGE:
             return 0
         e = corner_edge[offsets[c_poly[i]] + c_local[i]]
@@ -1361,7 +1411,64 @@ def _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, 
             return 0
         out[count] = e
         count += 1
+    for i in range(lo, hi):
+        if c_kind[i] != CONTACT_INTERIOR:
+            continue
+        normal = _row(normals, c_poly[i])
+        corner = _row(points, offsets[c_poly[i]])
+        for k in range(count):
+            for end in range(2):
+                if abs(_dot(normal, _minus(_row(vertices, edges[out[k], end]), corner))) > tol:
+                    return 0
     return count
+
+
+@njit_leaf
+def _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u, angle_tol):
+    """Whether the line along u (unit) through generators gk, gid (groups gg, ng of them) is a T-junction's line:
+    a vertex met inside an edge generator (a box's corner on the edge of a box beside or under it) and another
+    edge generator elsewhere, the line lying in the plane of that edge and a masked edge of the vertex. The
+    pencils of that plane about the other edge end there (_pencils_at_junction); any other line through the
+    vertex meeting the other edge meets the edge under the vertex as well, and is no node."""
+    if ng != 3:
+        return False
+    v = -1
+    for j in range(3):
+        if gk[j] == GEN_VERTEX:
+            if v >= 0:
+                return False
+            v = j
+    if v < 0:
+        return False
+    extra = -1
+    for k in range(3):
+        if k != v and gg[k] == gg[v]:
+            if extra >= 0:
+                return False
+            extra = k
+    if extra < 0 or edges[gid[extra], 0] == gid[v] or edges[gid[extra], 1] == gid[v]:
+        return False
+    along = _edge_direction(vertices, edges, gid[extra], -1)
+    for slot in range(ve_off[gid[v]], ve_off[gid[v] + 1]):
+        e_v = ve_edge[slot]
+        if not edge_mask[e_v]:
+            continue
+        normal = _cross(along, _edge_direction(vertices, edges, e_v, -1))
+        size = np.sqrt(_dot(normal, normal))
+        if size > angle_tol and abs(_dot(normal, u)) <= angle_tol * size:
+            return True
+    return False
+
+
+@njit_leaf
+def _same_arc(incidences, a, b):
+    """Whether incidence rows a and b have one key: arc kind, generators and end faces."""
+    if incidences.kind[a] != incidences.kind[b]:
+        return False
+    for k in range(3):
+        if incidences.codes[a, k] != incidences.codes[b, k]:
+            return False
+    return incidences.end[a, 0] == incidences.end[b, 0] and incidences.end[a, 1] == incidences.end[b, 1]
 
 
 @njit_leaf
@@ -1389,11 +1496,11 @@ def _candidate_rows(cand_vertices, cand_edges, ve_off, c):
 
 @njit(cache=True, nogil=True)
 def _validate_chunk(
-    geometry, plane_offsets, corner_vertex, corner_edge, bvh_arrays, ve_off, ve_edge, edge_mask,
+    geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry  # fmt: skip
+     corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
@@ -1566,13 +1673,16 @@ def _validate_chunk(
             continue
         # two edges met at one point cross there (objects in contact: a box's bottom edge across the top edge
         # of the box it stands on): that point bounds the arcs along either edge like a vertex, so the line
-        # is a node; a vertex on an edge generator, or two vertices at one point, stay rejected
+        # is a node; a vertex on an edge generator, or two vertices at one point, stay rejected but on the line
+        # of a T-junction's pencils (_junction_line), which ends those pencils only
         coincident = False
         for j in range(ng):
             for k in range(j + 1, ng):
                 if gg[j] == gg[k] and not (gk[j] == GEN_EDGE and gk[k] == GEN_EDGE):
                     coincident = True
-        if coincident:
+        junction = coincident and _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u,
+                                                 angle_tol)  # fmt: skip
+        if coincident and not junction:
             counters[REJECT_COINCIDENT] += 1
             continue
         # generators in line order
@@ -1682,6 +1792,10 @@ def _validate_chunk(
                 geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j],
                 extra, gk, gid, gg, ng,
             )  # fmt: skip
+        # the other swaths through a junction's line (the lines through its vertex meeting the other edge) pass
+        # it: no node ends them there
+        if junction:
+            continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
         # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge
@@ -1697,7 +1811,7 @@ def _validate_chunk(
                 across = _minus(offset, _scaled(u, tau_w))
                 if _dot(across, across) <= tol * tol:
                     incidences, n_inc = _arcs_off_edge(
-                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, corner_edge, v, e_v,
+                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
 
@@ -1711,8 +1825,8 @@ def _validate_chunk(
             g = first - 1 if side == 0 else last + 1
             n_extra = 0
             while 0 <= g < n_groups:
-                n_extra = _seam_edges(vertices, edges, offsets, corner_edge, c_poly, c_kind, c_local, g_lo[g], g_hi[g],
-                                      tol, extras)  # fmt: skip
+                n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
+                                      g_lo[g], g_hi[g], tol, extras)  # fmt: skip
                 masked = False
                 for x in range(n_extra):
                     masked = masked or edge_mask[extras[x]]
@@ -1725,6 +1839,11 @@ def _validate_chunk(
                 ):  # fmt: skip
                     break
                 g = g - 1 if side == 0 else g + 1
+            # the edge lies on a face the line ends on (a box's edge against the wall)
+            on_face = False
+            if n_extra > 0:
+                for i in range(g_lo[g], g_hi[g]):
+                    on_face = on_face or c_kind[i] == CONTACT_INTERIOR
             for x in range(n_extra):
                 extra = extras[x]
                 if not edge_mask[extra]:
@@ -1750,11 +1869,17 @@ def _validate_chunk(
                             norm = n_retained
                         n_retained += 1
                     norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                    first_row = n_inc
                     for sigma in (1.0, -1.0):
                         n_inc = _relax(
                             geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
                             node,
                         )  # fmt: skip
+                    # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
+                    # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
+                    # one way is no arc (lines going on between touching objects)
+                    if on_face and n_inc == first_row + 2 and _same_arc(incidences, first_row, first_row + 1):
+                        n_inc = first_row
                 # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
                 # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
                 # from it, the second's must follow into its edge from its vertex
@@ -1797,6 +1922,9 @@ def _validate_chunk(
                 n_inc = _relax(
                     geometry, line, retained, 3, pair_low, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
+            incidences, n_inc = _pencils_over_plane_edges(
+                geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone
+            )
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
@@ -1943,14 +2071,14 @@ def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
-        scene.edge_faces, topology.edge_face_local, topology.face_group,
+        scene.edge_faces, topology.edge_face_local, scene.polygon_edge_ids, topology.face_group,
         np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, float(scene.diagonal),
         float(scene.tol.length),
         float(scene.tol.cosine),
     )  # fmt: skip
     grown = scene.diagonal
     result = _validate_chunk(
-        geometry, scene.plane_offsets, scene.polygon_vertex_ids, scene.polygon_edge_ids, tuple(bvh.arrays),
+        geometry, scene.plane_offsets, scene.polygon_vertex_ids, tuple(bvh.arrays),
         topology.vertex_edge_offsets, topology.vertex_edges, np.ascontiguousarray(edge_mask, dtype=np.bool_),
         candidates.kind[lo:hi], candidates.vertices[lo:hi], candidates.edges[lo:hi],
         np.ascontiguousarray(candidates.origin[lo:hi], dtype=np.float64),
