@@ -2438,30 +2438,39 @@ def _junction_candidates(
                 for g in edge_ids:
                     if g == extra or edges[g, 0] == v or edges[g, 1] == v:
                         continue
-                    w0 = vertices[edges[g, 0]]
-                    w1 = vertices[edges[g, 1]]
-                    h0 = _dot(normal, w0) + offset
-                    h1 = _dot(normal, w1) + offset
-                    if h0 * h1 >= 0.0 or abs(h0) <= tol or abs(h1) <= tol:
+                    if not _towards_piercing(vertices, edges, g, normal, offset, w, n, tol, d):
                         continue
-                    share = h0 / (h0 - h1)
-                    for c in range(3):
-                        d[c] = w0[c] + share * (w1[c] - w0[c]) - w[c]
-                    length = _norm(d)
-                    if length <= tol:
-                        continue
-                    for c in range(3):
-                        d[c] /= length
-                    _, _, _, flipped = _line_cell(d, n)
-                    if flipped:
-                        for c in range(3):
-                            d[c] = -d[c]
                     if lazy and not _line_meets(w, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                                 angle_tol):  # fmt: skip
                         continue
                     out = _push(out, count, CANDIDATE_VEE, v, -1, min(g, extra), max(g, extra), -1, -1, w, d)
                     count += 1
     return _trim(out, count)
+
+
+@njit(cache=True)
+def _towards_piercing(vertices, edges, g, normal, offset, through, n, tol, d):
+    """Whether edge g crosses the plane normal . x + offset = 0 strictly (each end off it by more than tol) at
+    a point farther than tol from `through` (3,); if so, d (3,) is the unit direction from `through` to that
+    point, turned the way the cube map keeps line directions (_line_cell)."""
+    w0 = vertices[edges[g, 0]]
+    w1 = vertices[edges[g, 1]]
+    h0 = _dot(normal, w0) + offset
+    h1 = _dot(normal, w1) + offset
+    if h0 * h1 >= 0.0 or abs(h0) <= tol or abs(h1) <= tol:
+        return False
+    share = h0 / (h0 - h1)
+    for c in range(3):
+        d[c] = w0[c] + share * (w1[c] - w0[c]) - through[c]
+    length = _norm(d)
+    if length <= tol:
+        return False
+    for c in range(3):
+        d[c] /= length
+    if _line_cell(d, n)[3]:
+        for c in range(3):
+            d[c] = -d[c]
+    return True
 
 
 @njit_leaf
@@ -2578,27 +2587,9 @@ def _crossing_plane_candidates(
         normal = planes[k]
         offset = -_dot(normal, x)
         for g in edge_ids:
-            if g == e or g == f:
-                continue
-            w0 = vertices[edges[g, 0]]
-            w1 = vertices[edges[g, 1]]
-            h0 = _dot(normal, w0) + offset
-            h1 = _dot(normal, w1) + offset
             # strictly across: an edge ending in the plane meets it at a vertex (_crossing_candidates)
-            if h0 * h1 >= 0.0 or abs(h0) <= tol or abs(h1) <= tol:
+            if g == e or g == f or not _towards_piercing(vertices, edges, g, normal, offset, x, n, tol, d):
                 continue
-            share = h0 / (h0 - h1)
-            for c in range(3):
-                d[c] = w0[c] + share * (w1[c] - w0[c]) - x[c]
-            length = _norm(d)
-            if length <= tol:
-                continue
-            for c in range(3):
-                d[c] /= length
-            _, _, _, flipped = _line_cell(d, n)
-            if flipped:
-                for c in range(3):
-                    d[c] = -d[c]
             if lazy and not _line_meets(x, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                         angle_tol):  # fmt: skip
                 continue

@@ -1138,6 +1138,17 @@ def _relaxed_arc(
     return n_inc + 1
 
 
+@njit_leaf
+def _edge_met_before(line, corner_edge, offsets, g, i, e):
+    """Whether one of the contacts of group g of the line before contact i is with edge e (an edge met by its
+    faces gives a contact per face)."""
+    for earlier in range(line.g_lo[g], i):
+        if line.c_kind[earlier] == CONTACT_EDGE and \
+                corner_edge[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == e:  # fmt: skip
+            return True
+    return False
+
+
 @njit(cache=True)
 def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
                    tau_w, gk, gid, ng):  # fmt: skip
@@ -1164,11 +1175,7 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
                     _parallel_edges(g_.vertices, edges, e_v, e, g_.tol):  # fmt: skip
                 continue
             # once per edge: its faces give a contact each, and a generator edge has its own arcs
-            repeated = False
-            for earlier in range(line.g_lo[g], i):
-                if line.c_kind[earlier] == CONTACT_EDGE and \
-                        corner_edge[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == e:  # fmt: skip
-                    repeated = True
+            repeated = _edge_met_before(line, corner_edge, offsets, g, i, e)
             for k in range(ng):
                 if gk[k] == GEN_EDGE and gid[k] == e:
                     repeated = True
@@ -1255,12 +1262,7 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
             if abs(_dot(_edge_direction(vertices, edges, e, -1), normal)) > g_.angle_tol * normal_len:
                 continue
             # once per edge: each of its faces gives a contact
-            repeated = False
-            for earlier in range(line.g_lo[g], i):
-                if line.c_kind[earlier] == CONTACT_EDGE and \
-                        g_.corner_edge[g_.offsets[line.c_poly[earlier]] + line.c_local[earlier]] == e:  # fmt: skip
-                    repeated = True
-            if repeated:
+            if _edge_met_before(line, g_.corner_edge, g_.offsets, g, i, e):
                 continue
             if n_inc + 4 > incidences.node.shape[0]:
                 incidences = _grown(incidences, n_inc)
