@@ -367,13 +367,6 @@ class Skeleton:
             return np.empty((0, 2, 3)), np.empty((0, 3), dtype=np.int64)
         return np.concatenate(pieces), np.concatenate(generators)
 
-    def _arc_line(self, arc: int, s: float) -> tuple[np.ndarray, np.ndarray]:
-        """A point (3,) and direction (3,) of the arc's line at parameter s."""
-        point, direction = _arc_line_at(
-            self.arcs.kind[arc], self.arcs.codes[arc], s, self.scene.vertices, self.scene.edges, self.scene.n_vertices
-        )
-        return np.array(point), np.array(direction)
-
     def _trace(self, arc: int, normal: np.ndarray, offset: float) -> np.ndarray:
         """(k, 2, 3) float64 segments, k >= 0: where the arc's lines meet the plane normal . x + offset = 0.
 

@@ -577,6 +577,13 @@ def test_scale_keeps_nodes_and_arcs(name, factor):
 # traces on planes the arcs' lines run parallel to
 
 
+def _ev_line(scene, arcs, arc, s):
+    """The vertex (3,) of EV arc `arc` and the direction (3,) from it to the point at parameter s of its edge."""
+    vertex, code = arcs.codes[arc, 0], arcs.codes[arc, 1]
+    a, b = scene.vertices[scene.edges[code - scene.n_vertices]]
+    return scene.vertices[vertex], a + s * (b - a) - scene.vertices[vertex]
+
+
 def test_trace_stays_finite_where_arc_lines_run_parallel_to_the_plane():
     """`discontinuity_events` feeds a mesher: an EV swath traced on a plane parallel to its line at one end
     (that line meets the plane at infinity) gives finite segments on the plane, inside the scene's box grown
@@ -591,12 +598,12 @@ def test_trace_stays_finite_where_arc_lines_run_parallel_to_the_plane():
         s0, s1 = arcs.s[arc]
         if s1 - s0 < 1e-3:
             continue
-        apex, d0 = skeleton._arc_line(int(arc), s0)
-        _, d1 = skeleton._arc_line(int(arc), s1)
+        apex, d0 = _ev_line(scene, arcs, arc, s0)
+        _, d1 = _ev_line(scene, arcs, arc, s1)
         swath = np.cross(d0, d1)
         normal = np.cross(d0, swath)
         normal /= np.linalg.norm(normal)
-        through = apex + skeleton._arc_line(int(arc), 0.5 * (s0 + s1))[1]
+        through = apex + _ev_line(scene, arcs, arc, 0.5 * (s0 + s1))[1]
         with np.errstate(all="raise"):
             trace = skeleton._trace(int(arc), normal, -normal @ through)
             beside = swath / np.linalg.norm(swath)
