@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from .errors import SceneError
+from .jit import njit_leaf
 
 STACK_SIZE = 128
 """Traversal stack length; the build guarantees depth + 1 <= STACK_SIZE."""
@@ -309,7 +310,7 @@ def _build(box_min, box_max):
     )
 
 
-@njit(cache=True)
+@njit_leaf
 def box_outside_plane(box_lo, box_hi, nx, ny, nz, d, slack):
     """True when the whole box lies in n . x + d > slack * |n| (the box misses the grown half-space)."""
     lowest = d
@@ -319,10 +320,20 @@ def box_outside_plane(box_lo, box_hi, nx, ny, nz, d, slack):
     return lowest > slack * np.sqrt(nx * nx + ny * ny + nz * nz)
 
 
-@njit(cache=True)
-def _box_outside_planes(box_lo, box_hi, planes, slack):
+@njit_leaf
+def _box_outside_planes(lo, hi, row, planes, slack):
+    """Whether one half-space of planes (K, 4) cuts away box `row` of lo, hi (N, 3) (box_outside_plane). The
+    arrays and the row, not the row's views: a view costs two atomic reference counts, and the shaft queries
+    of the exact views test every node."""
     for k in range(planes.shape[0]):
-        if box_outside_plane(box_lo, box_hi, planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3], slack):
+        nx = planes[k, 0]
+        ny = planes[k, 1]
+        nz = planes[k, 2]
+        lowest = planes[k, 3]
+        lowest += nx * (lo[row, 0] if nx > 0.0 else hi[row, 0])
+        lowest += ny * (lo[row, 1] if ny > 0.0 else hi[row, 1])
+        lowest += nz * (lo[row, 2] if nz > 0.0 else hi[row, 2])
+        if lowest > slack * np.sqrt(nx * nx + ny * ny + nz * nz):
             return True
     return False
 
@@ -353,14 +364,14 @@ def bvh_collect_in_planes(
     while top > 0:
         top -= 1
         node = stack[top]
-        if _box_outside_planes(node_min[node], node_max[node], planes, slack):
+        if _box_outside_planes(node_min, node_max, node, planes, slack):
             continue
         child = node_child[node]
         if child < 0:
             start = node_first[node]
             for i in range(start, start + node_count[node]):
                 prim = order[i]
-                if n_planes > 0 and _box_outside_planes(box_min[prim], box_max[prim], planes, slack):
+                if n_planes > 0 and _box_outside_planes(box_min, box_max, prim, planes, slack):
                     continue
                 if found < capacity:
                     out[found] = prim

@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from .errors import SceneError
+from .jit import njit_leaf
 
 
 def point_polygon_ff(points, normals, polygon) -> np.ndarray:
@@ -100,7 +101,7 @@ def clip_to_hemisphere(polygon, point, normal, out):
     return count
 
 
-@njit(cache=True)
+@njit_leaf
 def lambert_sum(point, normal, corners, count):
     """Signed sum_i gamma_i N . (R_i x R_i+1)/|R_i x R_i+1| over the first `count` rows of corners (K, 3).
 

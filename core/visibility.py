@@ -23,6 +23,7 @@ from numba.typed import List
 from .bvh import build_bvh, bvh_collect_in_planes
 from .errors import SceneError
 from .formfactor import lambert_sum
+from .jit import njit_leaf
 from .scene import Scene
 
 #: generator polygon of edges created by the receiver's tangent plane (the horizon of the hemisphere)
@@ -657,23 +658,33 @@ def _source_frame(polygon):
 
 
 @njit(cache=True)
-def _keep_positive(points, labels, side, cut_polygon, cut_edge):
-    """The part of a convex polygon (K, D) where the signed `side` of its corners (K,) is >= 0.
+def _keep_positive(points, labels, side, sign, cut_polygon, cut_edge):
+    """The part of a convex polygon (K, D) where the signed side sign * side[i] of its corners (side (K,),
+    sign +-1.0) is >= 0.
 
     labels (K, 2) int64: generator of the edge starting at each corner; the new edge along the cut gets
     (cut_polygon, cut_edge). Returns the kept corners and their labels (possibly fewer than 3 corners).
+    Rounding can make the signs of a convex polygon change more than twice (a blocker sharing an edge with the
+    source lies along a side of the pyramid (point, source)): each such crossing adds a corner within rounding
+    of the plane, which _cleanup drops. The corners are counted first, so that the result is allocated once
+    (this runs for every blocker of every view).
     """
     k = len(points)
-    # room for a crossing at every edge: rounding can make the signs of a convex polygon change more than twice
-    # (a blocker sharing an edge with the source lies along a side of the pyramid (point, source)); the extra
-    # corners lie within rounding of the plane and _cleanup drops them
-    out = np.empty((2 * k, points.shape[1]))
-    out_labels = np.empty((2 * k, 2), dtype=np.int64)
+    count = 0
+    for i in range(k):
+        si = sign * side[i]
+        sj = sign * side[(i + 1) % k]
+        if si >= 0.0:
+            count += 1
+        if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
+            count += 1
+    out = np.empty((count, points.shape[1]))
+    out_labels = np.empty((count, 2), dtype=np.int64)
     count = 0
     for i in range(k):
         j = (i + 1) % k
-        si = side[i]
-        sj = side[j]
+        si = sign * side[i]
+        sj = sign * side[j]
         if si >= 0.0:
             out[count] = points[i]
             if si == 0.0 and sj < 0.0:
@@ -684,14 +695,15 @@ def _keep_positive(points, labels, side, cut_polygon, cut_edge):
             count += 1
         if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
             t = si / (si - sj)
-            out[count] = points[i] + t * (points[j] - points[i])
+            for c in range(points.shape[1]):
+                out[count, c] = points[i, c] + t * (points[j, c] - points[i, c])
             if si > 0.0:
                 out_labels[count, 0] = cut_polygon
                 out_labels[count, 1] = cut_edge
             else:
                 out_labels[count] = labels[i]
             count += 1
-    return out[:count].copy(), out_labels[:count].copy()
+    return out, out_labels
 
 
 @njit(cache=True)
@@ -701,7 +713,7 @@ def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
     for i in range(len(polygon)):
         p = polygon[i]
         side[i] = plane_normal[0] * p[0] + plane_normal[1] * p[1] + plane_normal[2] * p[2] + plane_offset
-    return _keep_positive(polygon, labels, side, cut_polygon, cut_edge)
+    return _keep_positive(polygon, labels, side, 1.0, cut_polygon, cut_edge)
 
 
 @njit(cache=True)
@@ -731,8 +743,8 @@ def _split(xy, labels, ax, ay, bx, by, cut_polygon, cut_edge, eps):
             return xy, labels, empty_xy, empty_labels
         if not left and right:
             return empty_xy, empty_labels, xy, labels
-    inside, inside_labels = _keep_positive(xy, labels, side, cut_polygon, cut_edge)
-    outside, outside_labels = _keep_positive(xy, labels, -side, cut_polygon, cut_edge)
+    inside, inside_labels = _keep_positive(xy, labels, side, 1.0, cut_polygon, cut_edge)
+    outside, outside_labels = _keep_positive(xy, labels, side, -1.0, cut_polygon, cut_edge)
     in_xy, in_labels = _cleanup(inside, inside_labels, eps)
     out_xy, out_labels = _cleanup(outside, outside_labels, eps)
     return in_xy, in_labels, out_xy, out_labels
@@ -778,7 +790,7 @@ def _cleanup(xy, labels, eps):
     return out, out_labels
 
 
-@njit(cache=True)
+@njit_leaf
 def _side_range(polygon, edge_owner, e):
     """Highest and lowest signed distance of `polygon`'s corners (K, 2) to the line of edge e of `edge_owner`."""
     ax = edge_owner[e, 0]
@@ -795,7 +807,7 @@ def _side_range(polygon, edge_owner, e):
     return highest, lowest
 
 
-@njit(cache=True)
+@njit_leaf
 def _relation(piece, blocker, eps):
     """0: disjoint (a separating edge line exists), 1: piece inside blocker, 2: they overlap."""
     inside_all = True
@@ -944,8 +956,11 @@ def _point_view(
 
     xy = np.empty((len(visible3), 2))
     for j in range(len(visible3)):
-        d = visible3[j] - origin
-        _to_frame(d, u, v, radius, xy[j])
+        d0 = visible3[j, 0] - origin[0]
+        d1 = visible3[j, 1] - origin[1]
+        d2 = visible3[j, 2] - origin[2]
+        xy[j, 0] = (d0 * u[0] + d1 * u[1] + d2 * u[2]) / radius
+        xy[j, 1] = (d0 * v[0] + d1 * v[1] + d2 * v[2]) / radius
     xy, visible_labels = _orient_ccw(xy, side_labels)
     xy, visible_labels = _cleanup(xy, visible_labels, eps2)
     if len(xy) == 0:
@@ -967,20 +982,36 @@ def _point_view(
     side_offsets = np.empty(m)
     # the shaft for the BVH, as outward half-spaces n . x + d <= 0: the sides, the source plane, the point's
     shaft = np.empty((m + 2, 4))
+    # by component: array expressions here would allocate eight temporaries per side
     for j in range(m):
-        a = visible3[j] - point
-        b = visible3[(j + 1) % m] - point
-        w = np.cross(a, b)
-        length = np.sqrt((w * w).sum())
+        k = (j + 1) % m
+        a0 = visible3[j, 0] - point[0]
+        a1 = visible3[j, 1] - point[1]
+        a2 = visible3[j, 2] - point[2]
+        b0 = visible3[k, 0] - point[0]
+        b1 = visible3[k, 1] - point[1]
+        b2 = visible3[k, 2] - point[2]
+        w0 = a1 * b2 - a2 * b1
+        w1 = a2 * b0 - a0 * b2
+        w2 = a0 * b1 - a1 * b0
+        length = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         if length == 0.0:
-            w[:] = 0.0
+            w0 = w1 = w2 = 0.0
         else:
-            w /= length
-        if (w * (centre - point)).sum() < 0.0:
-            w = -w
-        side_normals[j] = w
-        side_offsets[j] = -(w * point).sum()
-        shaft[j, :3] = -w
+            w0 /= length
+            w1 /= length
+            w2 /= length
+        if w0 * (centre[0] - point[0]) + w1 * (centre[1] - point[1]) + w2 * (centre[2] - point[2]) < 0.0:
+            w0 = -w0
+            w1 = -w1
+            w2 = -w2
+        side_normals[j, 0] = w0
+        side_normals[j, 1] = w1
+        side_normals[j, 2] = w2
+        side_offsets[j] = -(w0 * point[0] + w1 * point[1] + w2 * point[2])
+        shaft[j, 0] = -w0
+        shaft[j, 1] = -w1
+        shaft[j, 2] = -w2
         shaft[j, 3] = -side_offsets[j]
     oriented = n_source * sign
     shaft[m, :3] = -oriented
@@ -1109,7 +1140,7 @@ def _convex_hull(xy, group, eps2):
     return _cleanup(hull, labels, eps2)
 
 
-@njit(cache=True)
+@njit_leaf
 def _turn(a, b, c):
     return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 
@@ -1124,14 +1155,14 @@ def _own_edges(polygon, count):
     return labels
 
 
-@njit(cache=True)
+@njit_leaf
 def _to_frame(offset, u, v, radius, out):
     """Write the 2-D frame coordinates of a 3-D offset from the frame's origin into out (2,)."""
     out[0] = (offset[0] * u[0] + offset[1] * u[1] + offset[2] * u[2]) / radius
     out[1] = (offset[0] * v[0] + offset[1] * v[1] + offset[2] * v[2]) / radius
 
 
-@njit(cache=True)
+@njit_leaf
 def _covers(blocker, source, areas):
     """Contact rule for two coplanar polygons that overlap: the smaller one lies on the larger one.
 
@@ -1206,14 +1237,20 @@ def _project_blocker(
     if len(clipped) < 3:
         return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
     xy = np.empty((len(clipped), 2))
+    # by component: array expressions here would allocate four temporaries per corner
     for j in range(len(clipped)):
-        w = clipped[j] - point
-        depth = -(source_normal[0] * w[0] + source_normal[1] * w[1] + source_normal[2] * w[2])
+        w0 = clipped[j, 0] - point[0]
+        w1 = clipped[j, 1] - point[1]
+        w2 = clipped[j, 2] - point[2]
+        depth = -(source_normal[0] * w0 + source_normal[1] * w1 + source_normal[2] * w2)
         if depth <= 0.0:
             return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
         t = height / depth
-        d = point + t * w - origin
-        _to_frame(d, u, v, radius, xy[j])
+        d0 = point[0] + t * w0 - origin[0]
+        d1 = point[1] + t * w1 - origin[1]
+        d2 = point[2] + t * w2 - origin[2]
+        xy[j, 0] = (d0 * u[0] + d1 * u[1] + d2 * u[2]) / radius
+        xy[j, 1] = (d0 * v[0] + d1 * v[1] + d2 * v[2]) / radius
     xy, labels = _orient_ccw(xy, labels)
     return _cleanup(xy, labels, eps2)
 

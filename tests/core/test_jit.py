@@ -10,13 +10,18 @@ import numpy as np
 import pytest
 
 import core.bvh
+import core.formfactor
 import core.raycast
 import core.skeleton.enumeration
 import core.skeleton.skeleton
 import core.skeleton.validation
+import core.visibility
 from core.jit import njit_leaf
 
-MODULES = (core.bvh, core.raycast, core.skeleton.enumeration, core.skeleton.validation, core.skeleton.skeleton)
+MODULES = (
+    core.bvh, core.formfactor, core.raycast, core.visibility, core.skeleton.enumeration, core.skeleton.validation,
+    core.skeleton.skeleton,
+)
 
 
 def leaf_definitions() -> dict[str, ast.FunctionDef]:
