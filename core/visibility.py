@@ -717,6 +717,41 @@ def _clip3(polygon, labels, plane_normal, plane_offset, cut_polygon, cut_edge):
 
 
 @njit(cache=True)
+def _clip_into(points, labels, count, plane_normal, plane_offset, cut_polygon, cut_edge, out, out_labels):
+    """_clip3 of the first `count` corners of points (C, 3) and labels (C, 2) into out and out_labels (at least
+    2 count rows each, as rounding may add a corner per edge, see _keep_positive); returns the corners kept."""
+    kept = 0
+    for i in range(count):
+        j = (i + 1) % count
+        si = plane_normal[0] * points[i, 0] + plane_normal[1] * points[i, 1] + plane_normal[2] * points[i, 2]
+        si += plane_offset
+        sj = plane_normal[0] * points[j, 0] + plane_normal[1] * points[j, 1] + plane_normal[2] * points[j, 2]
+        sj += plane_offset
+        if si >= 0.0:
+            for c in range(3):
+                out[kept, c] = points[i, c]
+            if si == 0.0 and sj < 0.0:
+                out_labels[kept, 0] = cut_polygon
+                out_labels[kept, 1] = cut_edge
+            else:
+                out_labels[kept, 0] = labels[i, 0]
+                out_labels[kept, 1] = labels[i, 1]
+            kept += 1
+        if (si > 0.0 and sj < 0.0) or (si < 0.0 and sj > 0.0):
+            t = si / (si - sj)
+            for c in range(3):
+                out[kept, c] = points[i, c] + t * (points[j, c] - points[i, c])
+            if si > 0.0:
+                out_labels[kept, 0] = cut_polygon
+                out_labels[kept, 1] = cut_edge
+            else:
+                out_labels[kept, 0] = labels[i, 0]
+                out_labels[kept, 1] = labels[i, 1]
+            kept += 1
+    return kept
+
+
+@njit(cache=True)
 def _split(xy, labels, ax, ay, bx, by, cut_polygon, cut_edge, eps):
     """Split a convex counter-clockwise 2-D polygon by the directed line a->b.
 
@@ -1225,20 +1260,37 @@ def _project_blocker(
     Returns the projection as a counter-clockwise (K, 2) polygon in the source frame with its generators, or
     empty arrays when nothing of the blocker is inside the pyramid.
     """
-    labels = _own_edges(blocker, len(polygon))
-    clipped = polygon.copy()
-    for j in range(len(side_normals)):
-        clipped, labels = _clip3(
-            clipped, labels, side_normals[j], side_offsets[j], side_labels[j, 0], side_labels[j, 1]
-        )
-        if len(clipped) < 3:
+    # the clips go back and forth between two buffers (each clip at most doubles the corners)
+    count = len(polygon)
+    clipped = np.empty((2 * count + 2 * len(side_normals) + 2, 3))
+    labels = np.empty((len(clipped), 2), dtype=np.int64)
+    spare = np.empty_like(clipped)
+    spare_labels = np.empty_like(labels)
+    for j in range(count):
+        for c in range(3):
+            clipped[j, c] = polygon[j, c]
+        labels[j, 0] = blocker
+        labels[j, 1] = j
+    for j in range(len(side_normals) + 1):
+        if 2 * count > len(spare):
+            spare = np.empty((2 * count, 3))
+            spare_labels = np.empty((2 * count, 2), dtype=np.int64)
+        if j < len(side_normals):
+            count = _clip_into(
+                clipped, labels, count, side_normals[j], side_offsets[j], side_labels[j, 0], side_labels[j, 1],
+                spare, spare_labels,
+            )
+        else:
+            count = _clip_into(
+                clipped, labels, count, source_normal, source_offset, blocker, FACE_CROSSING, spare, spare_labels
+            )
+        if count < 3:
             return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
-    clipped, labels = _clip3(clipped, labels, source_normal, source_offset, blocker, FACE_CROSSING)
-    if len(clipped) < 3:
-        return np.empty((0, 2)), np.empty((0, 2), dtype=np.int64)
-    xy = np.empty((len(clipped), 2))
+        clipped, spare = spare, clipped
+        labels, spare_labels = spare_labels, labels
+    xy = np.empty((count, 2))
     # by component: array expressions here would allocate four temporaries per corner
-    for j in range(len(clipped)):
+    for j in range(count):
         w0 = clipped[j, 0] - point[0]
         w1 = clipped[j, 1] - point[1]
         w2 = clipped[j, 2] - point[2]
@@ -1251,8 +1303,8 @@ def _project_blocker(
         d2 = point[2] + t * w2 - origin[2]
         xy[j, 0] = (d0 * u[0] + d1 * u[1] + d2 * u[2]) / radius
         xy[j, 1] = (d0 * v[0] + d1 * v[1] + d2 * v[2]) / radius
-    xy, labels = _orient_ccw(xy, labels)
-    return _cleanup(xy, labels, eps2)
+    xy, corner_labels = _orient_ccw(xy, labels[:count].copy())
+    return _cleanup(xy, corner_labels, eps2)
 
 
 def _boundary(pieces_xy, pieces_labels, eps):
