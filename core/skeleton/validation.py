@@ -364,6 +364,28 @@ def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol, co
 
 
 @njit_leaf
+def _near_sides_on_line(points, offsets, normals, poly, point, u, tol):
+    """Whether every side of the polygon within tol of `point` (in its plane) lies on the line point + tau u:
+    both its corners within tol of the line."""
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = _row(normals, poly)
+    for k in range(count):
+        a = _row(points, first + k)
+        b = _row(points, first + (k + 1) % count)
+        inward = _cross(normal, _minus(b, a))
+        inward = _over(inward, np.sqrt(_dot(inward, inward)))
+        if abs(_dot(_minus(point, a), inward)) > tol:
+            continue
+        for corner in (a, b):
+            off = _minus(corner, point)
+            off = _minus(off, _scaled(u, _dot(off, u)))
+            if _dot(off, off) > tol * tol:
+                return False
+    return True
+
+
+@njit_leaf
 def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
                 lo, hi, diag, angle_tol, tol):  # fmt: skip
     """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
@@ -386,8 +408,13 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
             tau = 0.5 * (a + b)
             point = _along(start, tau, u)
             delta = _along(alpha, tau / diag, beta)
+            # a side the point lies on within tol but the line only crosses (at a grazing angle, near a corner
+            # it pivots about) is no contact along the line: the motion tells nothing there, and the nodes at
+            # either end of the arc, whose lines are farther from that side, see the lines stay outside
             if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol, False) and \
-                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol, False):  # fmt: skip
+                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol, False) and \
+                    _near_sides_on_line(points, offsets, normals, sl_poly[k], point, u, tol) and \
+                    _near_sides_on_line(points, offsets, normals, sl_poly[m], point, u, tol):  # fmt: skip
                 return True
     return False
 

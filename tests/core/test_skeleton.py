@@ -533,6 +533,16 @@ def test_arcs_to_an_edge_against_a_wall_end_where_they_pass_under_a_box():
     assert not _furnished_skeleton(34).arcs.dangling.any()
 
 
+def test_arcs_along_a_row_of_nearly_aligned_corners_have_both_nodes():
+    """Room 1: the front bottom corners of a box on the floor and the back bottom corners of another lie nearly on
+    one line along the floor (0.2 mm apart over 3.6 m). The lines of the floor through one box's corner meeting a
+    room edge or the other box's edge (EV arcs) pass the lines through the other box's corners, which graze the
+    first box's bottom face near its corner, within the tolerance over a length of 10 000 tolerances: the lines
+    of the arc beyond them were taken for lines between the box and the floor, though they stay outside the
+    box's bottom up to the line along its edge, which ends the arc (those nodes ended it too)."""
+    assert not _furnished_skeleton(1).arcs.dangling.any()
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="arcs whose lines lie in the floor's plane or the contact plane of stacked or side-by-side boxes "
