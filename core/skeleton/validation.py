@@ -1264,6 +1264,78 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
 
 
 @njit(cache=True)
+def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
+                               v, tau_v, group_v):  # fmt: skip
+    """The pencil arcs ending where the line runs along another object's edge e through vertex generator v (at
+    tau_v, group group_v) lying inside e (a box's top corner on the top edge of a box of the same height beside
+    it). An edge f crossing e on the line (the bottom edge of a box stacked on the other) holds the pencil of
+    the plane of e and an edge e_v of v about the crossing: its lines meet e_v, and their contact reaches v on
+    this line, along e. A corner off e ends such a pencil at the VEE node of the corner, e and f; this line
+    meets e along its length, no VEE candidate, so its nodes (two vertices on it) end the pencil: relaxing v,
+    the contact moves into e_v while the lines keep the crossing. Returns (incidences, grown when full, and the
+    next free row)."""
+    g_ = geometry
+    vertices, edges, offsets, corner_edge = g_.vertices, g_.edges, g_.offsets, g_.corner_edge
+    tol = g_.tol
+    for k in range(line.n_sliding):
+        poly = line.sl_poly[k]
+        for side in range(offsets[poly + 1] - offsets[poly]):
+            e = corner_edge[offsets[poly] + side]
+            if not edge_mask[e] or edges[e, 0] == v or edges[e, 1] == v:
+                continue
+            tau_a = _dot(_minus(_row(vertices, edges[e, 0]), line.start), line.u)
+            tau_b = _dot(_minus(_row(vertices, edges[e, 1]), line.start), line.u)
+            if not min(tau_a, tau_b) + tol < tau_v < max(tau_a, tau_b) - tol:
+                continue
+            on_line = True
+            for end in range(2):
+                off = _minus(_row(vertices, edges[e, end]), line.start)
+                off = _minus(off, _scaled(line.u, _dot(off, line.u)))
+                on_line = on_line and _dot(off, off) <= tol * tol
+            if not on_line:
+                continue
+            # once per edge: both its faces hold the line
+            repeated = False
+            for earlier in range(k):
+                other = line.sl_poly[earlier]
+                for c in range(offsets[other], offsets[other + 1]):
+                    repeated = repeated or corner_edge[c] == e
+            if repeated:
+                continue
+            along = _edge_direction(vertices, edges, e, -1)
+            for g in range(line.n_groups):
+                if g == group_v or not min(tau_a, tau_b) + tol < line.g_tau[g] < max(tau_a, tau_b) - tol:
+                    continue
+                for i in range(line.g_lo[g], line.g_hi[g]):
+                    if line.c_kind[i] != CONTACT_EDGE:
+                        continue
+                    f = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
+                    if not edge_mask[f] or edges[f, 0] == v or edges[f, 1] == v or \
+                            _parallel_edges(vertices, edges, e, f, tol) or \
+                            _edge_met_before(line, corner_edge, offsets, g, i, f):  # fmt: skip
+                        continue
+                    across = _edge_direction(vertices, edges, f, -1)
+                    for slot in range(ve_off[v], ve_off[v + 1]):
+                        e_v = ve_edge[slot]
+                        if not edge_mask[e_v]:
+                            continue
+                        into = _edge_direction(vertices, edges, e_v, v)
+                        normal = _cross(into, along)
+                        length = np.sqrt(_dot(normal, normal))
+                        if length <= g_.angle_tol or abs(_dot(across, normal)) <= g_.angle_tol * length:
+                            continue
+                        if n_inc + 1 > incidences.node.shape[0]:
+                            incidences = _grown(incidences, n_inc)
+                        r_kind, r_id, r_group, r_pin = retained
+                        r_kind[0], r_id[0], r_group[0] = GEN_EDGE, f, g
+                        r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
+                        r_kind[2], r_id[2], r_group[2] = GEN_EDGE, e, g
+                        n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
+                        r_pin[1] = -1
+    return incidences, n_inc
+
+
+@njit(cache=True)
 def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone):
     """The pencil arcs of an FXE node (generators gid in line order, groups gg, `lone` the third edge's index)
     named by another edge of the crossing's plane that its line crosses between the third edge and the crossing
@@ -1827,7 +1899,8 @@ def _validate_chunk(
             continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
-        # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge
+        # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge;
+        # or along another object's edge holding the vertex: see _pencils_to_vertex_on_edge
         for j in range(ng):
             if gk[j] != GEN_VERTEX:
                 continue
@@ -1843,6 +1916,11 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
+            if n_sliding > 0:
+                incidences, n_inc = _pencils_to_vertex_on_edge(
+                    geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
+                    g_tau[gg[j]], gg[j],
+                )  # fmt: skip
 
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other

@@ -543,6 +543,15 @@ def test_arcs_along_a_row_of_nearly_aligned_corners_have_both_nodes():
     assert not _furnished_skeleton(1).arcs.dangling.any()
 
 
+def test_pencil_arcs_end_where_their_vertex_lies_on_the_edge_of_a_box_beside():
+    """Room 3: two boxes of one height stand side by side, a third rests on both. The lines of their contact plane
+    through the point where a bottom edge of the upper box crosses the top edge of one box, meeting a vertical
+    edge of the other (EEE arcs), end where their contact on that edge reaches its top corner, which lies on the
+    crossed top edge: on the line along that edge, through the corner. The nodes of that line now end these
+    pencils (they had no end there; most rooms left dangling had such arcs)."""
+    assert not _furnished_skeleton(3).arcs.dangling.any()
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="arcs whose lines lie in the floor's plane or the contact plane of stacked or side-by-side boxes "
