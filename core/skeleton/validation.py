@@ -1414,6 +1414,55 @@ def _grown(incidences, n_inc):
 
 
 @njit_leaf
+def _without_arcs_in_plane(incidences, lo, hi, points, offsets, normals, vertices, edges, poly, tol):
+    """Drop the incidence rows lo..hi whose generators all lie in the polygon's plane (an edge with both ends within
+    tol of it); returns the new end of the rows."""
+    normal = _row(normals, poly)
+    offset = -_dot(normal, _row(points, offsets[poly]))
+    n_vertices = vertices.shape[0]
+    kept = lo
+    for row in range(lo, hi):
+        inside = True
+        for k in range(3):
+            code = incidences.codes[row, k]
+            if code < 0:
+                continue
+            if code < n_vertices:
+                inside = inside and _near_plane(_row(vertices, code), normal, offset, tol)
+            else:
+                for end in range(2):
+                    inside = inside and _near_plane(_row(vertices, edges[code - n_vertices, end]), normal, offset, tol)
+        if inside:
+            continue
+        incidences.node[kept] = incidences.node[row]
+        incidences.kind[kept] = incidences.kind[row]
+        for k in range(3):
+            incidences.codes[kept, k] = incidences.codes[row, k]
+        incidences.end[kept, 0] = incidences.end[row, 0]
+        incidences.end[kept, 1] = incidences.end[row, 1]
+        incidences.s[kept] = incidences.s[row]
+        incidences.direction[kept] = incidences.direction[row]
+        kept += 1
+    return kept
+
+
+@njit_leaf
+def _flat_vertex_tau(vertices, normals, plane_offsets, vf_off, vf_face, v, start, u, tol, angle_tol):
+    """Where the line start + tau u (u unit) meets vertex v when every face of v holds the line (a corner of a
+    polygon lying flat on the floor, met along the floor: no face of it gives a vertex contact), else NaN."""
+    if vf_off[v + 1] == vf_off[v]:
+        return np.nan
+    for i in range(vf_off[v], vf_off[v + 1]):
+        n = _row(normals, vf_face[i])
+        if abs(_dot(n, u)) > angle_tol or abs(_dot(n, start) + plane_offsets[vf_face[i]]) > tol:
+            return np.nan
+    offset = _minus(_row(vertices, v), start)
+    tau = _dot(offset, u)
+    across = _minus(offset, _scaled(u, tau))
+    return tau if _dot(across, across) <= tol * tol else np.nan
+
+
+@njit_leaf
 def _generator_met(points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off,
                    ef_face, kind, gid, start, end, tol):  # fmt: skip
     """Whether the segment start-end (3,) touches generator (kind, gid): a vertex contact at that vertex or an
@@ -1644,6 +1693,7 @@ def _validate_chunk(
     gk = np.zeros(4, dtype=np.int8)
     gid = np.zeros(4, dtype=np.int64)
     gg = np.zeros(4, dtype=np.int64)
+    flat = np.zeros(4, dtype=np.bool_)
     r_kind = np.zeros(3, dtype=np.int8)
     r_id = np.zeros(3, dtype=np.int64)
     r_group = np.zeros(3, dtype=np.int64)
@@ -1700,7 +1750,9 @@ def _validate_chunk(
             if not _generator_met(
                 points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off, ef_face,
                 gk[j], gid[j], segment_start, segment_end, tol,
-            ):  # fmt: skip
+            ) and not (gk[j] == GEN_VERTEX and np.isfinite(_flat_vertex_tau(
+                vertices, normals, plane_offsets, vf_off, vf_face, gid[j], segment_start, u, tol, angle_tol
+            ))):  # fmt: skip
                 missing = True
                 break
         if missing:
@@ -1765,6 +1817,36 @@ def _validate_chunk(
                 for j in range(ng):
                     if gk[j] == wanted and gid[j] == element:
                         gg[j] = g
+        # a flat polygon's corner met along its plane (a rug's, by lines along the floor) gives no contact, yet the
+        # arcs of its lines leaving the floor end there: a group of its own at its point, without contacts (the
+        # vertex's faces stand for them where its arcs are relaxed)
+        for j in range(ng):
+            flat[j] = False
+        for j in range(ng):
+            if gg[j] >= 0 or gk[j] != GEN_VERTEX or n_groups == g_tau.shape[0]:
+                continue
+            tau = _flat_vertex_tau(vertices, normals, plane_offsets, vf_off, vf_face, gid[j], start, u, tol, angle_tol)
+            if not np.isfinite(tau):
+                continue
+            at = 0
+            while at < n_groups and g_tau[at] < tau - tol:
+                at += 1
+            flat[j] = True
+            if at < n_groups and g_tau[at] <= tau + tol:
+                gg[j] = at
+                continue
+            for g in range(n_groups, at, -1):
+                g_lo[g] = g_lo[g - 1]
+                g_hi[g] = g_hi[g - 1]
+                g_tau[g] = g_tau[g - 1]
+            g_lo[at] = g_hi[at - 1] if at > 0 else 0
+            g_hi[at] = g_lo[at]
+            g_tau[at] = tau
+            n_groups += 1
+            for k in range(ng):
+                if gg[k] >= at:
+                    gg[k] += 1
+            gg[j] = at
         missing = False
         for j in range(ng):
             if gg[j] < 0:
@@ -1791,6 +1873,7 @@ def _validate_chunk(
             k = j
             while k > 0 and gg[k - 1] > gg[k]:
                 gg[k - 1], gg[k] = gg[k], gg[k - 1]
+                flat[k - 1], flat[k] = flat[k], flat[k - 1]
                 gk[k - 1], gk[k] = gk[k], gk[k - 1]
                 gid[k - 1], gid[k] = gid[k], gid[k - 1]
                 k -= 1
@@ -1813,6 +1896,7 @@ def _validate_chunk(
             continue
 
         node = n_nodes
+        node_rows = n_inc
         n_nodes += 1
         node_cand[node] = c
         if ng == 2:
@@ -1984,8 +2068,10 @@ def _validate_chunk(
                         )  # fmt: skip
                     # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
                     # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
-                    # one way is no arc (lines going on between touching objects)
-                    if on_face and n_inc == first_row + 2 and _same_arc(incidences, first_row, first_row + 1):
+                    # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
+                    # corner (a rug's, lines along the floor): the lines slide over that polygon either way
+                    if (on_face or flat[j]) and n_inc == first_row + 2 and \
+                            _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
                         n_inc = first_row
                 # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
                 # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
@@ -2079,6 +2165,15 @@ def _validate_chunk(
                     n_inc = _relax(
                         geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
+        # at a flat polygon's corner, the arcs whose lines all lie in its plane slide over the polygon: it is no
+        # event of theirs, and the lines through its other corners do not end them
+        for j in range(ng):
+            if flat[j]:
+                n_inc = _without_arcs_in_plane(
+                    incidences, node_rows, n_inc, points, offsets, normals, vertices, edges, vf_face[vf_off[gid[j]]],
+                    tol,
+                )  # fmt: skip
+                break
     return (
         node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
         node_dir[:n_nodes], node_tau[:n_nodes], node_end[:n_nodes],
