@@ -364,6 +364,28 @@ def _inside_to_first_order(points, offsets, normals, poly, point, delta, tol, co
 
 
 @njit_leaf
+def _near_sides_on_line(points, offsets, normals, poly, point, u, tol):
+    """Whether every side of the polygon within tol of `point` (in its plane) lies on the line point + tau u:
+    both its corners within tol of the line."""
+    first = offsets[poly]
+    count = offsets[poly + 1] - first
+    normal = _row(normals, poly)
+    for k in range(count):
+        a = _row(points, first + k)
+        b = _row(points, first + (k + 1) % count)
+        inward = _cross(normal, _minus(b, a))
+        inward = _over(inward, np.sqrt(_dot(inward, inward)))
+        if abs(_dot(_minus(point, a), inward)) > tol:
+            continue
+        for corner in (a, b):
+            off = _minus(corner, point)
+            off = _minus(off, _scaled(u, _dot(off, u)))
+            if _dot(off, off) > tol * tol:
+                return False
+    return True
+
+
+@njit_leaf
 def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
                 lo, hi, diag, angle_tol, tol):  # fmt: skip
     """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
@@ -386,8 +408,13 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
             tau = 0.5 * (a + b)
             point = _along(start, tau, u)
             delta = _along(alpha, tau / diag, beta)
+            # a side the point lies on within tol but the line only crosses (at a grazing angle, near a corner
+            # it pivots about) is no contact along the line: the motion tells nothing there, and the nodes at
+            # either end of the arc, whose lines are farther from that side, see the lines stay outside
             if _inside_to_first_order(points, offsets, normals, sl_poly[k], point, delta, tol, False) and \
-                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol, False):  # fmt: skip
+                    _inside_to_first_order(points, offsets, normals, sl_poly[m], point, delta, tol, False) and \
+                    _near_sides_on_line(points, offsets, normals, sl_poly[k], point, u, tol) and \
+                    _near_sides_on_line(points, offsets, normals, sl_poly[m], point, u, tol):  # fmt: skip
                 return True
     return False
 
@@ -1237,6 +1264,78 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
 
 
 @njit(cache=True)
+def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
+                               v, tau_v, group_v):  # fmt: skip
+    """The pencil arcs ending where the line runs along another object's edge e through vertex generator v (at
+    tau_v, group group_v) lying inside e (a box's top corner on the top edge of a box of the same height beside
+    it). An edge f crossing e on the line (the bottom edge of a box stacked on the other) holds the pencil of
+    the plane of e and an edge e_v of v about the crossing: its lines meet e_v, and their contact reaches v on
+    this line, along e. A corner off e ends such a pencil at the VEE node of the corner, e and f; this line
+    meets e along its length, no VEE candidate, so its nodes (two vertices on it) end the pencil: relaxing v,
+    the contact moves into e_v while the lines keep the crossing. Returns (incidences, grown when full, and the
+    next free row)."""
+    g_ = geometry
+    vertices, edges, offsets, corner_edge = g_.vertices, g_.edges, g_.offsets, g_.corner_edge
+    tol = g_.tol
+    for k in range(line.n_sliding):
+        poly = line.sl_poly[k]
+        for side in range(offsets[poly + 1] - offsets[poly]):
+            e = corner_edge[offsets[poly] + side]
+            if not edge_mask[e] or edges[e, 0] == v or edges[e, 1] == v:
+                continue
+            tau_a = _dot(_minus(_row(vertices, edges[e, 0]), line.start), line.u)
+            tau_b = _dot(_minus(_row(vertices, edges[e, 1]), line.start), line.u)
+            if not min(tau_a, tau_b) + tol < tau_v < max(tau_a, tau_b) - tol:
+                continue
+            on_line = True
+            for end in range(2):
+                off = _minus(_row(vertices, edges[e, end]), line.start)
+                off = _minus(off, _scaled(line.u, _dot(off, line.u)))
+                on_line = on_line and _dot(off, off) <= tol * tol
+            if not on_line:
+                continue
+            # once per edge: both its faces hold the line
+            repeated = False
+            for earlier in range(k):
+                other = line.sl_poly[earlier]
+                for c in range(offsets[other], offsets[other + 1]):
+                    repeated = repeated or corner_edge[c] == e
+            if repeated:
+                continue
+            along = _edge_direction(vertices, edges, e, -1)
+            for g in range(line.n_groups):
+                if g == group_v or not min(tau_a, tau_b) + tol < line.g_tau[g] < max(tau_a, tau_b) - tol:
+                    continue
+                for i in range(line.g_lo[g], line.g_hi[g]):
+                    if line.c_kind[i] != CONTACT_EDGE:
+                        continue
+                    f = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
+                    if not edge_mask[f] or edges[f, 0] == v or edges[f, 1] == v or \
+                            _parallel_edges(vertices, edges, e, f, tol) or \
+                            _edge_met_before(line, corner_edge, offsets, g, i, f):  # fmt: skip
+                        continue
+                    across = _edge_direction(vertices, edges, f, -1)
+                    for slot in range(ve_off[v], ve_off[v + 1]):
+                        e_v = ve_edge[slot]
+                        if not edge_mask[e_v]:
+                            continue
+                        into = _edge_direction(vertices, edges, e_v, v)
+                        normal = _cross(into, along)
+                        length = np.sqrt(_dot(normal, normal))
+                        if length <= g_.angle_tol or abs(_dot(across, normal)) <= g_.angle_tol * length:
+                            continue
+                        if n_inc + 1 > incidences.node.shape[0]:
+                            incidences = _grown(incidences, n_inc)
+                        r_kind, r_id, r_group, r_pin = retained
+                        r_kind[0], r_id[0], r_group[0] = GEN_EDGE, f, g
+                        r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
+                        r_kind[2], r_id[2], r_group[2] = GEN_EDGE, e, g
+                        n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
+                        r_pin[1] = -1
+    return incidences, n_inc
+
+
+@njit(cache=True)
 def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone):
     """The pencil arcs of an FXE node (generators gid in line order, groups gg, `lone` the third edge's index)
     named by another edge of the crossing's plane that its line crosses between the third edge and the crossing
@@ -1312,6 +1411,55 @@ def _grown(incidences, n_inc):
     bigger.s[:n_inc] = incidences.s[:n_inc]
     bigger.direction[:n_inc] = incidences.direction[:n_inc]
     return bigger
+
+
+@njit_leaf
+def _without_arcs_in_plane(incidences, lo, hi, points, offsets, normals, vertices, edges, poly, tol):
+    """Drop the incidence rows lo..hi whose generators all lie in the polygon's plane (an edge with both ends within
+    tol of it); returns the new end of the rows."""
+    normal = _row(normals, poly)
+    offset = -_dot(normal, _row(points, offsets[poly]))
+    n_vertices = vertices.shape[0]
+    kept = lo
+    for row in range(lo, hi):
+        inside = True
+        for k in range(3):
+            code = incidences.codes[row, k]
+            if code < 0:
+                continue
+            if code < n_vertices:
+                inside = inside and _near_plane(_row(vertices, code), normal, offset, tol)
+            else:
+                for end in range(2):
+                    inside = inside and _near_plane(_row(vertices, edges[code - n_vertices, end]), normal, offset, tol)
+        if inside:
+            continue
+        incidences.node[kept] = incidences.node[row]
+        incidences.kind[kept] = incidences.kind[row]
+        for k in range(3):
+            incidences.codes[kept, k] = incidences.codes[row, k]
+        incidences.end[kept, 0] = incidences.end[row, 0]
+        incidences.end[kept, 1] = incidences.end[row, 1]
+        incidences.s[kept] = incidences.s[row]
+        incidences.direction[kept] = incidences.direction[row]
+        kept += 1
+    return kept
+
+
+@njit_leaf
+def _flat_vertex_tau(vertices, normals, plane_offsets, vf_off, vf_face, v, start, u, tol, angle_tol):
+    """Where the line start + tau u (u unit) meets vertex v when every face of v holds the line (a corner of a
+    polygon lying flat on the floor, met along the floor: no face of it gives a vertex contact), else NaN."""
+    if vf_off[v + 1] == vf_off[v]:
+        return np.nan
+    for i in range(vf_off[v], vf_off[v + 1]):
+        n = _row(normals, vf_face[i])
+        if abs(_dot(n, u)) > angle_tol or abs(_dot(n, start) + plane_offsets[vf_face[i]]) > tol:
+            return np.nan
+    offset = _minus(_row(vertices, v), start)
+    tau = _dot(offset, u)
+    across = _minus(offset, _scaled(u, tau))
+    return tau if _dot(across, across) <= tol * tol else np.nan
 
 
 @njit_leaf
@@ -1545,6 +1693,7 @@ def _validate_chunk(
     gk = np.zeros(4, dtype=np.int8)
     gid = np.zeros(4, dtype=np.int64)
     gg = np.zeros(4, dtype=np.int64)
+    flat = np.zeros(4, dtype=np.bool_)
     r_kind = np.zeros(3, dtype=np.int8)
     r_id = np.zeros(3, dtype=np.int64)
     r_group = np.zeros(3, dtype=np.int64)
@@ -1601,7 +1750,9 @@ def _validate_chunk(
             if not _generator_met(
                 points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off, ef_face,
                 gk[j], gid[j], segment_start, segment_end, tol,
-            ):  # fmt: skip
+            ) and not (gk[j] == GEN_VERTEX and np.isfinite(_flat_vertex_tau(
+                vertices, normals, plane_offsets, vf_off, vf_face, gid[j], segment_start, u, tol, angle_tol
+            ))):  # fmt: skip
                 missing = True
                 break
         if missing:
@@ -1666,6 +1817,36 @@ def _validate_chunk(
                 for j in range(ng):
                     if gk[j] == wanted and gid[j] == element:
                         gg[j] = g
+        # a flat polygon's corner met along its plane (a rug's, by lines along the floor) gives no contact, yet the
+        # arcs of its lines leaving the floor end there: a group of its own at its point, without contacts (the
+        # vertex's faces stand for them where its arcs are relaxed)
+        for j in range(ng):
+            flat[j] = False
+        for j in range(ng):
+            if gg[j] >= 0 or gk[j] != GEN_VERTEX or n_groups == g_tau.shape[0]:
+                continue
+            tau = _flat_vertex_tau(vertices, normals, plane_offsets, vf_off, vf_face, gid[j], start, u, tol, angle_tol)
+            if not np.isfinite(tau):
+                continue
+            at = 0
+            while at < n_groups and g_tau[at] < tau - tol:
+                at += 1
+            flat[j] = True
+            if at < n_groups and g_tau[at] <= tau + tol:
+                gg[j] = at
+                continue
+            for g in range(n_groups, at, -1):
+                g_lo[g] = g_lo[g - 1]
+                g_hi[g] = g_hi[g - 1]
+                g_tau[g] = g_tau[g - 1]
+            g_lo[at] = g_hi[at - 1] if at > 0 else 0
+            g_hi[at] = g_lo[at]
+            g_tau[at] = tau
+            n_groups += 1
+            for k in range(ng):
+                if gg[k] >= at:
+                    gg[k] += 1
+            gg[j] = at
         missing = False
         for j in range(ng):
             if gg[j] < 0:
@@ -1692,6 +1873,7 @@ def _validate_chunk(
             k = j
             while k > 0 and gg[k - 1] > gg[k]:
                 gg[k - 1], gg[k] = gg[k], gg[k - 1]
+                flat[k - 1], flat[k] = flat[k], flat[k - 1]
                 gk[k - 1], gk[k] = gk[k], gk[k - 1]
                 gid[k - 1], gid[k] = gid[k], gid[k - 1]
                 k -= 1
@@ -1714,6 +1896,7 @@ def _validate_chunk(
             continue
 
         node = n_nodes
+        node_rows = n_inc
         n_nodes += 1
         node_cand[node] = c
         if ng == 2:
@@ -1800,7 +1983,8 @@ def _validate_chunk(
             continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
-        # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge
+        # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge;
+        # or along another object's edge holding the vertex: see _pencils_to_vertex_on_edge
         for j in range(ng):
             if gk[j] != GEN_VERTEX:
                 continue
@@ -1816,6 +2000,11 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
+            if n_sliding > 0:
+                incidences, n_inc = _pencils_to_vertex_on_edge(
+                    geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
+                    g_tau[gg[j]], gg[j],
+                )  # fmt: skip
 
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
@@ -1879,8 +2068,10 @@ def _validate_chunk(
                         )  # fmt: skip
                     # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
                     # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
-                    # one way is no arc (lines going on between touching objects)
-                    if on_face and n_inc == first_row + 2 and _same_arc(incidences, first_row, first_row + 1):
+                    # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
+                    # corner (a rug's, lines along the floor): the lines slide over that polygon either way
+                    if (on_face or flat[j]) and n_inc == first_row + 2 and \
+                            _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
                         n_inc = first_row
                 # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
                 # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
@@ -1974,6 +2165,15 @@ def _validate_chunk(
                     n_inc = _relax(
                         geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
+        # at a flat polygon's corner, the arcs whose lines all lie in its plane slide over the polygon: it is no
+        # event of theirs, and the lines through its other corners do not end them
+        for j in range(ng):
+            if flat[j]:
+                n_inc = _without_arcs_in_plane(
+                    incidences, node_rows, n_inc, points, offsets, normals, vertices, edges, vf_face[vf_off[gid[j]]],
+                    tol,
+                )  # fmt: skip
+                break
     return (
         node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
         node_dir[:n_nodes], node_tau[:n_nodes], node_end[:n_nodes],
