@@ -441,7 +441,7 @@ def _grid_directions(n: int) -> np.ndarray:
 # small geometry (numba)
 
 
-@njit(cache=True)
+@njit_leaf
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -455,7 +455,15 @@ def _cross(a, b):
     return out
 
 
-@njit(cache=True)
+@njit_leaf
+def _cross_row(a0, a1, a2, b0, b1, b2, out, row):
+    """out[row] = a x b, without allocating."""
+    out[row, 0] = a1 * b2 - a2 * b1
+    out[row, 1] = a2 * b0 - a0 * b2
+    out[row, 2] = a0 * b1 - a1 * b0
+
+
+@njit_leaf
 def _norm(a):
     return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
@@ -529,7 +537,7 @@ def _to_chart(points, count, a, sign, origin, out):
         out[k, 2] = sign * (points[k, c] - origin[c])
 
 
-@njit(cache=True)
+@njit_leaf
 def _projected_box(buf, count):
     """(u_min, u_max, w_min, w_max) of the central projection of buf[:count] (x0 >= 0) onto x0 = 1; the
     whole face when a point sits at the apex."""
@@ -550,7 +558,7 @@ def _projected_box(buf, count):
     return u0, u1, w0, w1
 
 
-@njit(cache=True)
+@njit_leaf
 def _segment_distance(p0, p1, p2, q0, q1, q2):
     """Distance from the origin to the segment p-q (coordinates)."""
     d0 = q0 - p0
@@ -566,7 +574,7 @@ def _segment_distance(p0, p1, p2, q0, q1, q2):
     return np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
 
 
-@njit(cache=True)
+@njit_leaf
 def _polygon_distance(buf, count):
     """Distance from the origin to the convex polygon buf[:count] (any count >= 1, duplicates allowed)."""
     best = np.inf
@@ -608,7 +616,7 @@ def _polygon_distance(buf, count):
 # occlusion maps
 
 
-@njit(cache=True)
+@njit_leaf
 def _source_distance(q, nb, centre):
     """Distance from a point to the source segment q[0]..q[nb]."""
     return _segment_distance(q[0, 0] - centre[0], q[0, 1] - centre[1], q[0, 2] - centre[2], q[nb, 0] - centre[0],
@@ -651,7 +659,7 @@ def _grid_range(u0, u1, w0, w1, n):
     return k0, k1, l0, l1
 
 
-@njit(cache=True)
+@njit_leaf
 def _any_wanted(wanted, a, k0, k1, l0, l1, n):
     """Whether some bin wants a cell of chart a in the index ranges [k0, k1) x [l0, l1)."""
     for b in range(wanted.shape[0]):
@@ -969,7 +977,7 @@ def _line_meets(origin, d, src, points, offsets, normals, plane_offsets, edge_ou
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _reaches_sources(q, b, centre, radius, src, centres, radii, normals, plane_offsets, tol):
     """Whether a line through bin b of q (nb+1, 3) and a source polygon (within tol) may pass within `radius`
     of `centre`: False only when none can. Shifting such a line to pass through the bin's middle m moves it by
@@ -1008,7 +1016,7 @@ def _reaches_sources(q, b, centre, radius, src, centres, radii, normals, plane_o
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
     """Whether a line lying in polygon f's plane and crossing f may count as crossing a source (_line_meets):
     it meets a source only where the source's bounding sphere reaches f's plane, and it lies in a source's
@@ -1022,7 +1030,7 @@ def _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _segment_reaches_sources(q, nb, centre, radius, src, centres, radii, normals, plane_offsets, tol):
     """_reaches_sources for some bin of q (nb+1, 3)."""
     for b in range(nb):
@@ -1339,17 +1347,22 @@ def _push(out, count, kind, v0, v1, e0, e1, e2, e3, origin, d):
     o_edge[count, 1] = e1
     o_edge[count, 2] = e2
     o_edge[count, 3] = e3
-    o_origin[count] = origin
-    o_dir[count] = d
+    for c in range(3):
+        o_origin[count, c] = origin[c]
+        o_dir[count, c] = d[c]
     return out
 
 
 @njit(cache=True)
 def _push_edges(out, count, kind, e0, e1, e2, e3, origin, d):
     """Append a candidate of four edge generators (E4, FEE), given in any order; returns the output."""
-    four = np.array([e0, e1, e2, e3], dtype=np.int64)
-    four.sort()
-    return _push(out, count, kind, -1, -1, four[0], four[1], four[2], four[3], origin, d)
+    # a sorting network on the four ids: an array to sort would be allocated per candidate
+    e0, e1 = min(e0, e1), max(e0, e1)
+    e2, e3 = min(e2, e3), max(e2, e3)
+    e0, e2 = min(e0, e2), max(e0, e2)
+    e1, e3 = min(e1, e3), max(e1, e3)
+    e1, e2 = min(e1, e2), max(e1, e2)
+    return _push(out, count, kind, -1, -1, e0, e1, e2, e3, origin, d)
 
 
 @njit(cache=True)
@@ -1716,7 +1729,7 @@ def _curve_meets(c0, c1, c2, c3, poly, count, slack):
     return lo <= slack and hi >= -slack
 
 
-@njit(cache=True)
+@njit_leaf
 def _bilinear_range(c0, c1, c2, c3, poly, count):
     """(lo, hi): the range of c0 + c1 s + c2 t + c3 s t over the convex polygon poly[:count] of the (s, t)
     plane (harmonic: reached on the boundary, a quadratic along each side)."""
@@ -1830,53 +1843,57 @@ def _quadratic_roots(c0, c1, c2, c3, k0, k1, k2, k3, cosine, roots):
 
 
 @njit_leaf
-def _along_from_s(h, xd, y_rel, yd, ed, margin, delta, out):
+def _along_from_s(rel, along, x, y, ed, margin, delta, out, row):
     """For the lines E(s) X(t) meeting edge y (E(s) = e_a + s ed, X(t) = e_a + h + t xd, y from e_a + y_rel
-    along yd): the point Y(u) = e_a + y_rel + u yd where the line through E(s) meets y is a Moebius function
-    of s, u = (a0 - s b0) / (s b1 - a1). out (7,): a0, a1, b0, b1, the u range (lo, hi) of y grown by margin
-    at both ends, and 1 (filled). The range is unbounded when s hardly depends on u (x and y in one plane with
-    E(s), or nearly: determinant within delta of the coefficients' scale), where u from s means nothing.
+    along yd; h, xd, y_rel, yd the rows x and y of rel and along): the point Y(u) = e_a + y_rel + u yd where
+    the line through E(s) meets y is a Moebius function of s, u = (a0 - s b0) / (s b1 - a1). out[row] (7,):
+    a0, a1, b0, b1, the u range (lo, hi) of y grown by margin at both ends, and 1 (filled). Rows are passed
+    by index: a view would cost the caller two reference counts per root. The range is unbounded when s
+    hardly depends on u (x and y in one plane with E(s), or nearly: determinant within delta of the
+    coefficients' scale), where u from s means nothing.
 
     The line through Y(u) meeting x lies in the plane through Y(u) and x, of normal A - u B with A = (x_a - y_a)
     x xd, B = yd x xd; E(s) lies in it for s = (A - u B) . (Y(u) - e_a) / ((A - u B) . ed), linear over linear
     in u (B . yd = 0), and inverted here."""
-    r0 = h[0] - y_rel[0]
-    r1 = h[1] - y_rel[1]
-    r2 = h[2] - y_rel[2]
-    a0 = r1 * xd[2] - r2 * xd[1]
-    a1 = r2 * xd[0] - r0 * xd[2]
-    a2 = r0 * xd[1] - r1 * xd[0]
-    b0 = yd[1] * xd[2] - yd[2] * xd[1]
-    b1 = yd[2] * xd[0] - yd[0] * xd[2]
-    b2 = yd[0] * xd[1] - yd[1] * xd[0]
-    out[0] = a0 * y_rel[0] + a1 * y_rel[1] + a2 * y_rel[2]
-    out[1] = a0 * yd[0] + a1 * yd[1] + a2 * yd[2] - (b0 * y_rel[0] + b1 * y_rel[1] + b2 * y_rel[2])
-    out[2] = a0 * ed[0] + a1 * ed[1] + a2 * ed[2]
-    out[3] = -(b0 * ed[0] + b1 * ed[1] + b2 * ed[2])
-    out[6] = 1.0
-    determinant = out[1] * out[2] - out[0] * out[3]
-    scale = (abs(out[0]) + abs(out[1])) * (abs(out[2]) + abs(out[3]))
+    r0 = rel[x, 0] - rel[y, 0]
+    r1 = rel[x, 1] - rel[y, 1]
+    r2 = rel[x, 2] - rel[y, 2]
+    x0, x1, x2 = along[x, 0], along[x, 1], along[x, 2]
+    y0, y1, y2 = along[y, 0], along[y, 1], along[y, 2]
+    a0 = r1 * x2 - r2 * x1
+    a1 = r2 * x0 - r0 * x2
+    a2 = r0 * x1 - r1 * x0
+    b0 = y1 * x2 - y2 * x1
+    b1 = y2 * x0 - y0 * x2
+    b2 = y0 * x1 - y1 * x0
+    out[row, 0] = a0 * rel[y, 0] + a1 * rel[y, 1] + a2 * rel[y, 2]
+    out[row, 1] = a0 * y0 + a1 * y1 + a2 * y2 - (b0 * rel[y, 0] + b1 * rel[y, 1] + b2 * rel[y, 2])
+    out[row, 2] = a0 * ed[0] + a1 * ed[1] + a2 * ed[2]
+    out[row, 3] = -(b0 * ed[0] + b1 * ed[1] + b2 * ed[2])
+    out[row, 6] = 1.0
+    determinant = out[row, 1] * out[row, 2] - out[row, 0] * out[row, 3]
+    scale = (abs(out[row, 0]) + abs(out[row, 1])) * (abs(out[row, 2]) + abs(out[row, 3]))
     if abs(determinant) <= delta * scale:
-        out[4] = -np.inf
-        out[5] = np.inf
+        out[row, 4] = -np.inf
+        out[row, 5] = np.inf
         return
-    reach = margin / np.sqrt(yd[0] * yd[0] + yd[1] * yd[1] + yd[2] * yd[2])
-    out[4] = -reach
-    out[5] = 1.0 + reach
+    reach = margin / np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    out[row, 4] = -reach
+    out[row, 5] = 1.0 + reach
 
 
 @njit_leaf
-def _far_past_ends(moebius, s):
-    """Whether the line of the family through E(s) meets y outside its u range (see _along_from_s), without
-    a division; False when the range is unbounded or the map has its pole at s."""
-    if moebius[5] == np.inf:
+def _far_past_ends(moebius, row, s):
+    """Whether the line of the family through E(s) meets y outside its u range (moebius[row], see
+    _along_from_s), without a division; False when the range is unbounded or the map has its pole at s."""
+    if moebius[row, 5] == np.inf:
         return False
-    numerator = moebius[0] - s * moebius[2]
-    denominator = s * moebius[3] - moebius[1]
+    numerator = moebius[row, 0] - s * moebius[row, 2]
+    denominator = s * moebius[row, 3] - moebius[row, 1]
     if denominator > 0.0:
-        return numerator < moebius[4] * denominator or numerator > moebius[5] * denominator
+        return numerator < moebius[row, 4] * denominator or numerator > moebius[row, 5] * denominator
     if denominator < 0.0:
-        return numerator > moebius[4] * denominator or numerator < moebius[5] * denominator
+        return numerator > moebius[row, 4] * denominator or numerator < moebius[row, 5] * denominator
     return False
 
 
@@ -1962,15 +1979,15 @@ def _edge_candidates(
         for f in edge_ids:
             if f == e or _share_vertex(edges, e, f):
                 continue
-            xa = vertices[edges[f, 0]]
-            xb = vertices[edges[f, 1]]
+            xa = edges[f, 0]
+            xb = edges[f, 1]
             for c in range(3):
-                ends[m, 0, c] = xa[c]
-                ends[m, 1, c] = xb[c]
-                rel[m, c] = xa[c] - ea[c]
-                along[m, c] = xb[c] - xa[c]
-            wg[m] = _cross(rel[m], along[m])
-            dg[m] = _cross(ed, along[m])
+                ends[m, 0, c] = vertices[xa, c]
+                ends[m, 1, c] = vertices[xb, c]
+                rel[m, c] = vertices[xa, c] - ea[c]
+                along[m, c] = vertices[xb, c] - vertices[xa, c]
+            _cross_row(rel[m, 0], rel[m, 1], rel[m, 2], along[m, 0], along[m, 1], along[m, 2], wg, m)
+            _cross_row(ed[0], ed[1], ed[2], along[m, 0], along[m, 1], along[m, 2], dg, m)
             ids[m] = f
             slots[m] = m
             m += 1
@@ -2058,12 +2075,13 @@ def _edge_candidates(
                         continue
                     if bits[rx] & bits[ry] == 0:
                         continue
-                    w = wg[sy]
-                    g = dg[sy]
-                    c0 = h[0] * w[0] + h[1] * w[1] + h[2] * w[2]
-                    c1 = -(ed[0] * w[0] + ed[1] * w[1] + ed[2] * w[2]) - (h[0] * g[0] + h[1] * g[1] + h[2] * g[2])
-                    c2 = xd[0] * w[0] + xd[1] * w[1] + xd[2] * w[2]
-                    c3 = -(xd[0] * g[0] + xd[1] * g[1] + xd[2] * g[2])
+                    # by element: views of the rows would cost two reference counts per pair
+                    w0, w1, w2 = wg[sy, 0], wg[sy, 1], wg[sy, 2]
+                    dg0, dg1, dg2 = dg[sy, 0], dg[sy, 1], dg[sy, 2]
+                    c0 = h[0] * w0 + h[1] * w1 + h[2] * w2
+                    c1 = -(ed[0] * w0 + ed[1] * w1 + ed[2] * w2) - (h[0] * dg0 + h[1] * dg1 + h[2] * dg2)
+                    c2 = xd[0] * w0 + xd[1] * w1 + xd[2] * w2
+                    c3 = -(xd[0] * dg0 + xd[1] * dg1 + xd[2] * dg2)
                     slack = eps * (abs(c0) + abs(c1) + abs(c2) + abs(c3))
                     if not _curve_meets(c0, c1, c2, c3, region, k_count, slack):
                         continue
@@ -2127,10 +2145,10 @@ def _edge_candidates(
                                 continue
                             # where the line meets y and z, from s alone: most lines of the cell miss one
                             if moebius[ya, 6] == 0.0:
-                                _along_from_s(h, xd, rel[ry_slot], along[ry_slot], ed, margin, delta, moebius[ya])
+                                _along_from_s(rel, along, sx, ry_slot, ed, margin, delta, moebius, ya)
                             if moebius[za, 6] == 0.0:
-                                _along_from_s(h, xd, rel[rz_slot], along[rz_slot], ed, margin, delta, moebius[za])
-                            if _far_past_ends(moebius[ya], s) or _far_past_ends(moebius[za], s):
+                                _along_from_s(rel, along, sx, rz_slot, ed, margin, delta, moebius, za)
+                            if _far_past_ends(moebius, ya, s) or _far_past_ends(moebius, za, s):
                                 continue
                             length = _norm(d)
                             if length <= tol:
@@ -2448,7 +2466,7 @@ def _junction_candidates(
     return _trim(out, count)
 
 
-@njit(cache=True)
+@njit_leaf
 def _towards_piercing(vertices, edges, g, normal, offset, through, n, tol, d):
     """Whether edge g crosses the plane normal . x + offset = 0 strictly (each end off it by more than tol) at
     a point farther than tol from `through` (3,); if so, d (3,) is the unit direction from `through` to that
