@@ -258,7 +258,7 @@ def _box_exit(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: n
 # kernels: one polygon
 
 
-@njit(cache=True)
+@njit_leaf
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -480,7 +480,7 @@ def _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, bounds):
     return True
 
 
-@njit(cache=True)
+@njit_leaf
 def _perpendicular_frame(direction):
     """Two unit 3-vectors (tuples) spanning the plane perpendicular to a nonzero direction (3,)."""
     length = np.sqrt(_dot(direction, direction))

@@ -1283,17 +1283,20 @@ def _arcs_leave_freely_slice(lo, hi, kind, codes, s, dangling, n_vertices, verti
                              ef_face, ef_local, cosine, result):
     """_arcs_leave_freely of arcs lo..hi-1, into result (A,) bool (left as it is for the other arcs)."""
     elements, angles = _free_scratch()
+    direction = np.empty(3)
     for arc in range(lo, hi):
         if kind[arc] != ARC_EV or dangling[arc]:
             continue
         v = codes[arc, 0]
         e = codes[arc, 1] - n_vertices
         t = 0.5 * (s[arc, 0] + s[arc, 1])
-        a = vertices[edges[e, 0]]
+        a = edges[e, 0]
+        b = edges[e, 1]
+        for c in range(3):
+            direction[c] = vertices[a, c] + t * (vertices[b, c] - vertices[a, c]) - vertices[v, c]
         result[arc] = _leaves_freely(
-            v, a + t * (vertices[edges[e, 1]] - a) - vertices[v], points, offsets, normals, vf_off, vf_face,
-            vf_corner, rest_off, rest_face, other_off, other_code, ef_off, ef_face, ef_local, cosine, elements,
-            angles,
+            v, direction, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face, other_off,
+            other_code, ef_off, ef_face, ef_local, cosine, elements, angles,
         )  # fmt: skip
 
 
@@ -1545,7 +1548,7 @@ def _free_scratch():
     return np.empty((3, 64), dtype=np.int64), np.empty((6, 128))
 
 
-@njit(cache=True)
+@njit_leaf
 def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_corner, rest_off, rest_face,
                    other_off, other_code, ef_off, ef_face, ef_local, cosine, elements, angles):
     """Whether the line leaving vertex v along `direction` (3,) goes into free space, not into a solid. Its
@@ -1554,13 +1557,14 @@ def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_c
     on its edge (other_off, other_code: see _elements_at) the lines into the solid around that element, the
     faces of each element winding on their own. elements, angles: scratch (see _free_scratch)."""
     n_vertices = vf_off.shape[0] - 1
-    length = np.sqrt(direction @ direction)
+    length = np.sqrt(direction[0] * direction[0] + direction[1] * direction[1] + direction[2] * direction[2])
     unit = angles[5, :3]
     for k in range(3):
         unit[k] = direction[k] / length
     direction = unit
     for i in range(rest_off[v], rest_off[v + 1]):
-        if normals[rest_face[i]] @ direction < -cosine:
+        face = rest_face[i]
+        if normals[face, 0] * unit[0] + normals[face, 1] * unit[1] + normals[face, 2] * unit[2] < -cosine:
             return False
     faces = elements[0]
     kinds = elements[1]
@@ -1588,7 +1592,7 @@ def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_c
     return True
 
 
-@njit(cache=True)
+@njit_leaf
 def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine, angles):
     """Whether a line leaving a point along unit `direction` (frame e1, e2 across it) enters a solid whose
     faces meet there: faces[:count] touched as kinds[:count] (CONTACT_VERTEX at corner, CONTACT_EDGE along the
@@ -1600,7 +1604,8 @@ def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e
     bounds = angles[3]
     n = 0
     for i in range(count):
-        rate = normals[faces[i]] @ direction
+        face = faces[i]
+        rate = normals[face, 0] * direction[0] + normals[face, 1] * direction[1] + normals[face, 2] * direction[2]
         if abs(rate) <= cosine:
             continue
         starts[n], lengths[n] = _contact_arc(points, offsets, normals, faces[i], kinds[i], corners[i], e1, e2)
@@ -1610,9 +1615,15 @@ def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e
         n += 1
     if n == 0:
         return False
-    ordered = angles[4, : 2 * n]
-    ordered[:] = bounds[: 2 * n]
-    ordered.sort()
+    # sorted by insertion (a few arcs; numba's sort would need its runtime)
+    ordered = angles[4]
+    for k in range(2 * n):
+        value = bounds[k]
+        j = k
+        while j > 0 and ordered[j - 1] > value:
+            ordered[j] = ordered[j - 1]
+            j -= 1
+        ordered[j] = value
     for k in range(2 * n):
         lo = ordered[k]
         hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + 2.0 * np.pi
