@@ -450,19 +450,20 @@ def test_where_a_family_line_meets_its_third_edge_follows_from_s():
     checked = refused = 0
     for _ in range(200):
         e, x, y = rng.uniform(-1.0, 1.0, (3, 2, 3))
-        moebius = np.empty(7)
-        _along_from_s(x[0] - e[0], x[1] - x[0], y[0] - e[0], y[1] - y[0], e[1] - e[0], margin, 1e-8, moebius)
-        assert np.isfinite(moebius[5])
+        rel, along = np.array([x[0] - e[0], y[0] - e[0]]), np.array([x[1] - x[0], y[1] - y[0]])
+        moebius = np.empty((1, 7))
+        _along_from_s(rel, along, 0, 1, e[1] - e[0], margin, 1e-8, moebius, 0)
+        assert np.isfinite(moebius[0, 5])
         for s in rng.uniform(0.0, 1.0, 5):
             point = e[0] + s * (e[1] - e[0])
             u = _closest_parameter(point, _line_through_point_meeting(point, x, y), y)
-            from_s = (moebius[0] - s * moebius[2]) / (s * moebius[3] - moebius[1])
+            from_s = (moebius[0, 0] - s * moebius[0, 2]) / (s * moebius[0, 3] - moebius[0, 1])
             assert from_s == pytest.approx(u, rel=1e-6, abs=1e-6)
             reach = margin / np.linalg.norm(y[1] - y[0])
             if -reach + 1e-6 < u < 1.0 + reach - 1e-6:
-                assert not _far_past_ends(moebius, s)
+                assert not _far_past_ends(moebius, 0, s)
             elif u < -reach - 1e-6 or u > 1.0 + reach + 1e-6:
-                assert _far_past_ends(moebius, s)
+                assert _far_past_ends(moebius, 0, s)
                 refused += 1
             checked += 1
     assert refused > checked // 4
@@ -470,6 +471,7 @@ def test_where_a_family_line_meets_its_third_edge_follows_from_s():
     x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     y = np.array([[0.0, 1.0, 0.0], [1.0, 2.0, 0.0]])
     e = np.array([[0.5, 0.5, -1.0], [0.5, 0.5, 1.0]])
-    moebius = np.empty(7)
-    _along_from_s(x[0] - e[0], x[1] - x[0], y[0] - e[0], y[1] - y[0], e[1] - e[0], margin, 1e-8, moebius)
-    assert not any(_far_past_ends(moebius, s) for s in np.linspace(0.0, 1.0, 11))
+    rel, along = np.array([x[0] - e[0], y[0] - e[0]]), np.array([x[1] - x[0], y[1] - y[0]])
+    moebius = np.empty((1, 7))
+    _along_from_s(rel, along, 0, 1, e[1] - e[0], margin, 1e-8, moebius, 0)
+    assert not any(_far_past_ends(moebius, 0, s) for s in np.linspace(0.0, 1.0, 11))
