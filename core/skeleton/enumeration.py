@@ -1054,27 +1054,55 @@ def _register(
     the bin to the target reach (_sub_cells). Grows the arrays when full; returns (keys, targets, sides, bits,
     count). Only the cells of `mask` (nb, 3 n n) bool are worked for; in a lazy build, targets that no line
     through the bin and a source polygon `src` (within tol) meets within the margin are skipped at once."""
+    clip = np.empty((6, _CLIP, 3))
     quad = np.empty((4, 3))
-    buf_a = np.empty((_CLIP, 3))
-    buf_b = np.empty((_CLIP, 3))
-    cell_a = np.empty((_CLIP, 3))
-    cell_b = np.empty((_CLIP, 3))
-    row_a = np.empty((_CLIP, 3))
-    row_b = np.empty((_CLIP, 3))
     origin = np.zeros(3)
-    row_lo = np.empty(8)
-    row_hi = np.empty(8)
+    middle = np.empty(3)
+    row_bounds = np.empty((2, 8))
+    b = 0
+    t = 0
+    while True:
+        count, b, t = _register_from(
+            b, t, q, nb, depth, lazy, mask, ends, target_ids, n, margin, eps, keys, targets, sides, bits, count, src,
+            centres, radii, normals, plane_offsets, tol, clip, quad, origin, middle, row_bounds,
+        )  # fmt: skip
+        if b == nb:
+            return keys, targets, sides, bits, count
+        keys = _grow(keys)
+        targets = _grow(targets)
+        sides = _grow8(sides)
+        bits = _grow(bits)
+
+
+@njit_leaf
+def _register_from(
+    b_first, t_first, q, nb, depth, lazy, mask, ends, target_ids, n, margin, eps, keys, targets, sides, bits, count,
+    src, centres, radii, normals, plane_offsets, tol, clip, quad, origin, middle, row_bounds,
+):  # fmt: skip
+    """The work of _register from bin b_first and its target t_first on, compiled without numba's runtime (the
+    calls of its clipping loop passed arrays, each costing two reference counts). Returns (count, nb, 0) when
+    done, or (count, b, t) when the arrays are full while target t of bin b is registered: its rows are then
+    dropped (count is where they began), to be registered again once the caller has grown the arrays.
+    clip (6, _CLIP, 3), quad (4, 3), origin (3,) zeros, middle (3,), row_bounds (2, 8): scratch."""
+    buf_a = clip[0]
+    buf_b = clip[1]
+    cell_a = clip[2]
+    cell_b = clip[3]
+    row_a = clip[4]
+    row_b = clip[5]
+    row_lo = row_bounds[0]
+    row_hi = row_bounds[1]
     n_cells = 3 * n * n
     point_source = nb == 1 and q[0, 0] == q[1, 0] and q[0, 1] == q[1, 1] and q[0, 2] == q[1, 2]
-    middle = np.empty(3)
-    for b in range(nb):
+    for b in range(b_first, nb):
         # the farthest any line of the bin may go: skip targets beyond every bound (of the cells worked for)
         reach = 0.0
         for side in range(2):
             for cell in range(n_cells):
                 if depth[b, side, cell] > reach and mask[b, cell]:
                     reach = depth[b, side, cell]
-        for t in range(target_ids.shape[0]):
+        for t in range(t_first if b == b_first else 0, target_ids.shape[0]):
+            target_first_row = count
             if lazy:
                 for c in range(3):
                     middle[c] = 0.5 * (ends[t, 0, c] + ends[t, 1, c])
@@ -1139,16 +1167,13 @@ def _register(
                             if bound < np.inf and _polygon_distance(cell_a, k) > bound + margin:
                                 continue
                             if count == keys.shape[0]:
-                                keys = _grow(keys)
-                                targets = _grow(targets)
-                                sides = _grow8(sides)
-                                bits = _grow(bits)
+                                return target_first_row, b, t
                             keys[count] = b * n_cells + cell
                             targets[count] = target_ids[t]
                             sides[count] = side
                             bits[count] = _sub_cells(cell_a, k, lo_u, hi_u, lo_w, hi_w, sub_eps, row_lo, row_hi)
                             count += 1
-    return keys, targets, sides, bits, count
+    return count, nb, 0
 
 
 @njit_leaf
