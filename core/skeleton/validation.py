@@ -656,6 +656,27 @@ def _through_own_solid(kind_a, id_a, kind_b, id_b, element_solid, vf_off, vf_fac
 
 
 @njit_leaf
+def _plane_holds_generators(points, offsets, normals, vertices, edges, poly, r_kind, r_id, r_group, n_retained, tol):
+    """Whether two of the retained generators (r_kind, r_id, r_group: n_retained of them) met at different points
+    of the line lie in the polygon's plane (a vertex, or an edge with both ends, within tol of it)."""
+    normal = _row(normals, poly)
+    offset = -_dot(normal, _row(points, offsets[poly]))
+    group = -1
+    for j in range(n_retained):
+        if r_kind[j] == GEN_VERTEX:
+            inside = _near_plane(_row(vertices, r_id[j]), normal, offset, tol)
+        else:
+            inside = _near_plane(_row(vertices, edges[r_id[j], 0]), normal, offset, tol) and \
+                _near_plane(_row(vertices, edges[r_id[j], 1]), normal, offset, tol)  # fmt: skip
+        if not inside:
+            continue
+        if group >= 0 and r_group[j] != group:
+            return True
+        group = r_group[j]
+    return False
+
+
+@njit_leaf
 def _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
     """(a, b), a < b: two retained edges met at one point and not parallel (crossing there: objects in contact),
     else (-1, -1)."""
@@ -775,6 +796,23 @@ def _relaxed_arc(
         return n_inc
     if not _solve4(system, rhs, x):
         return n_inc
+    # two retained generators met at different points of the plane of a face the line slides over hold every
+    # line of the arc in that plane; the solved motion leaves it by rounding where their contacts are close
+    # together (the system is then nearly singular across the plane), enough to find a crossing of that face
+    # between them
+    for k in range(n_sliding):
+        if _plane_holds_generators(points, offsets, normals, vertices, edges, sl_poly[k], r_kind, r_id, r_group,
+                                   n_retained, tol):  # fmt: skip
+            n = _row(normals, sl_poly[k])
+            m1 = _dot(n, f1)
+            m2 = _dot(n, f2)
+            across = m1 * m1 + m2 * m2
+            if across > 0.0:
+                for base in (0, 2):
+                    out = (x[base] * m1 + x[base + 1] * m2) / across
+                    x[base] -= out * m1
+                    x[base + 1] -= out * m2
+            break
     beta = _combined(x[2], f1, x[3], f2)
     beta_len = np.sqrt(_dot(beta, beta))
     tilted = u
