@@ -986,6 +986,17 @@ def _relaxed_arc(
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
                 return n_inc
+            # so does the other edge of a pencil's pair, met at its end vertex too (objects touching corner to
+            # corner): its contact slides along it off the corner as well
+            if crossed >= 0 and r_pin[norm_partner] >= 0:
+                d_crossed = _edge_direction(vertices, edges, crossed, -1)
+                c1 = _dot(d_crossed, f1)
+                c2 = _dot(d_crossed, f2)
+                if c1 * c1 + c2 * c2 <= 1e-24:
+                    return n_inc
+                slide_crossed = (_dot(delta, f1) * c1 + _dot(delta, f2) * c2) / (c1 * c1 + c2 * c2)
+                if slide_crossed * (1.0 if edges[crossed, 0] == r_pin[norm_partner] else -1.0) <= _SIDE_EPS:
+                    return n_inc
             generator_shift = slide * _dot(d, u)
             nearest = np.inf
             side = 1 if g == last else 0
@@ -1299,6 +1310,68 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
             n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
             r_pin[1] = -1
     return n_inc
+
+
+@njit(cache=True)
+def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask,
+                              ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
+    """The arcs of the pencils in the plane of vertex generator v's edge e_v and an edge e_w of another vertex w at
+    v's point (objects touching corner to corner: a chair leg's top corner under the seat's corner) about a
+    generator edge piercing that plane, when the node's line lies in it: their lines cross e_v and e_w near the
+    corner, both contacts moving into their edges from it, and pass through the corner on this line, where
+    both contacts reach their edge's end at once (no node through one of the vertices and the other edge names
+    them). gk, gid, gg: the node's ng generators and their groups. Returns (incidences, grown when full, and
+    the next free row)."""
+    g_ = geometry
+    vertices, edges, offsets = g_.vertices, g_.edges, g_.offsets
+    u = line.u
+    corner = _row(vertices, v)
+    for i in range(line.g_lo[group_v], line.g_hi[group_v]):
+        if line.c_kind[i] != CONTACT_VERTEX:
+            continue
+        w = corner_vertex[offsets[line.c_poly[i]] + line.c_local[i]]
+        if w == v:
+            continue
+        # once per vertex: each of its faces gives a contact
+        repeated = False
+        for earlier in range(line.g_lo[group_v], i):
+            repeated = repeated or (line.c_kind[earlier] == CONTACT_VERTEX and
+                                    corner_vertex[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == w)
+        if repeated:
+            continue
+        for slot_v in range(ve_off[v], ve_off[v + 1]):
+            e_v = ve_edge[slot_v]
+            if not edge_mask[e_v]:
+                continue
+            into_v = _edge_direction(vertices, edges, e_v, v)
+            for slot_w in range(ve_off[w], ve_off[w + 1]):
+                e_w = ve_edge[slot_w]
+                if not edge_mask[e_w]:
+                    continue
+                into_w = _edge_direction(vertices, edges, e_w, w)
+                normal = _cross(into_v, into_w)
+                length = np.sqrt(_dot(normal, normal))
+                # edges along each other span no plane; lines off the plane are no pencil of it
+                if length <= g_.angle_tol or abs(_dot(normal, u)) > g_.angle_tol * length:
+                    continue
+                # the lines run between their contacts within the angle of the two edges at the corner: where the
+                # objects touch there face against face, such lines are inside the solids
+                if _faces_meet_in(g_, e_v, e_w, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
+                    continue
+                for k in range(ng):
+                    if gk[k] != GEN_EDGE or \
+                            abs(_dot(_edge_direction(vertices, edges, gid[k], -1), normal)) <= g_.angle_tol * length:
+                        continue
+                    if n_inc + 1 > incidences.node.shape[0]:
+                        incidences = _grown(incidences, n_inc)
+                    r_kind, r_id, r_group, r_pin = retained
+                    r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
+                    r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
+                    r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_w, group_v, w
+                    n_inc = _relax(geometry, line, retained, 3, 1, into_v, 1.0, scratch, incidences, n_inc, node)
+                    r_pin[1] = -1
+                    r_pin[2] = -1
+    return incidences, n_inc
 
 
 @njit(cache=True)
@@ -2022,7 +2095,9 @@ def _validate_chunk(
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
         # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge;
-        # or along another object's edge holding the vertex: see _pencils_to_vertex_on_edge
+        # in the plane of an edge of it and an edge of another object's corner at its point: see
+        # _pencils_at_shared_corner; or along another object's edge holding the vertex: see
+        # _pencils_to_vertex_on_edge
         for j in range(ng):
             if gk[j] != GEN_VERTEX:
                 continue
@@ -2038,6 +2113,10 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
+            incidences, n_inc = _pencils_at_shared_corner(
+                geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
+                v, gg[j], gk, gid, gg, ng,
+            )  # fmt: skip
             if n_sliding > 0:
                 incidences, n_inc = _pencils_to_vertex_on_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
