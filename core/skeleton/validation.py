@@ -1312,6 +1312,26 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
     return n_inc
 
 
+@njit_leaf
+def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j,
+                             extra, gk, gid, gg, ng):  # fmt: skip
+    """The arcs of the node's generators (gk, gid, gg: ng of them) with vertex generator j replaced by another
+    object's edge `extra` holding it, the contact sliding either way along that edge, and the pencils of that
+    junction (_pencils_at_junction). Returns the next free row (the caller leaves room for these rows)."""
+    r_kind, r_id, r_group, _ = retained
+    for k in range(ng):
+        r_kind[k] = GEN_EDGE if k == j else gk[k]
+        r_id[k] = extra if k == j else gid[k]
+        r_group[k] = gg[k]
+    norm_dir = _edge_direction(geometry.vertices, geometry.edges, extra, -1)
+    for sigma in (1.0, -1.0):
+        n_inc = _relax(geometry, line, retained, ng, j, norm_dir, sigma, scratch, incidences, n_inc, node)
+    return _pencils_at_junction(
+        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j], extra,
+        gk, gid, gg, ng,
+    )  # fmt: skip
+
+
 @njit(cache=True)
 def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask,
                               ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
@@ -2055,39 +2075,26 @@ def _validate_chunk(
         # a vertex generator lying on another element's edge (a box's corner on the room's floor edge, on the
         # top edge of the box it stands on, on the collinear edge of a box beside it): the arcs along that edge
         # through the vertex's point start or end here as well, so the vertex is replaced by the edge, sliding
-        # either way
+        # either way. Each such edge: the vertex may lie on a seam of collinear edges of boxes side by side
         for j in range(ng):
             if ng > 3 or gk[j] != GEN_VERTEX:
                 continue
             g = gg[j]
-            extra = -1
             for i in range(g_lo[g], g_hi[g]):
                 if c_kind[i] != CONTACT_EDGE:
                     continue
-                e = corner_edge[offsets[c_poly[i]] + c_local[i]]
-                if edge_mask[e] and edges[e, 0] != gid[j] and edges[e, 1] != gid[j]:
-                    extra = e
-                    break
-            if extra < 0:
-                continue
-            n_retained = 0
-            norm = -1
-            for k in range(ng):
-                r_kind[n_retained] = GEN_EDGE if k == j else gk[k]
-                r_id[n_retained] = extra if k == j else gid[k]
-                r_group[n_retained] = gg[k]
-                if k == j:
-                    norm = n_retained
-                n_retained += 1
-            norm_dir = _edge_direction(vertices, edges, extra, -1)
-            for sigma in (1.0, -1.0):
-                n_inc = _relax(
-                    geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
-                )
-            n_inc = _pencils_at_junction(
-                geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j],
-                extra, gk, gid, gg, ng,
-            )  # fmt: skip
+                extra = corner_edge[offsets[c_poly[i]] + c_local[i]]
+                if not edge_mask[extra] or edges[extra, 0] == gid[j] or edges[extra, 1] == gid[j] or \
+                        _edge_met_before(line, corner_edge, offsets, g, i, extra):  # fmt: skip
+                    continue
+                # the relaxed arcs and the junction's pencils (an edge of the vertex by a pivot edge)
+                need = 2 + 3 * (ve_off[gid[j] + 1] - ve_off[gid[j]])
+                while n_inc + need > incidences.node.shape[0]:
+                    incidences = _grown(incidences, n_inc)
+                n_inc = _vertex_replaced_by_edge(
+                    geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j, extra,
+                    gk, gid, gg, ng,
+                )  # fmt: skip
         # the other swaths through a junction's line (the lines through its vertex meeting the other edge) pass
         # it: no node ends them there
         if junction:

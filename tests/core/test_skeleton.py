@@ -594,6 +594,18 @@ def test_pencil_arcs_end_where_two_objects_touch_corner_to_corner():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
+def test_arcs_along_a_seam_end_at_a_corner_on_it():
+    """Two boxes side by side and a lower one against both (office-432's crates): the lower box's top corner lies
+    on the seam of the two others' collinear vertical edges. The lines through a vertex meeting either edge of
+    the seam (EV arcs) end or pass where their contact reaches that corner: the node through the vertex and the
+    corner replaces the corner by each edge of the seam, not by the first one met only (the other's arcs
+    dangled)."""
+    skeleton = build_skeleton(boxes_in_room(
+        [((1.0, 1.0, 0.0), (1.5, 1.5, 0.5)), ((1.5, 1.0, 0.0), (1.9, 1.5, 0.5)), ((1.5, 1.5, 0.0), (1.9, 1.8, 0.3))]
+    ))  # fmt: skip
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
 def test_furnished_rooms_have_no_dangling_arc():
     """bench skeleton --furnished 200 leaves no dangling arc (session 13; 1 in room 82 before the motion of arcs
     held in a face's plane by two generators was kept in that plane). History: 82 arcs in 33 rooms before the
