@@ -1313,6 +1313,31 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
 
 
 @njit_leaf
+def _swaths_leaving_both_vertices(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
+                                  ve_edge, gid, gg, extra, g):  # fmt: skip
+    """The EEE arcs of a line through two vertex generators gid[0], gid[1] (groups gg) and meeting edge `extra`
+    (group g): through `extra`, an edge of either vertex, the contacts on both moving into them from their
+    vertices (the first vertex's edge normalises the motion, the second's is pinned). Returns the next free row
+    (the caller leaves room for one per pair of edges)."""
+    r_kind, r_id, r_group, r_pin = retained
+    for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
+        e_slide = ve_edge[slot]
+        if not edge_mask[e_slide] or e_slide == extra:
+            continue
+        for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
+            e_pin = ve_edge[other]
+            if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
+                continue
+            r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
+            r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
+            r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
+            norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_slide, gid[0])
+            n_inc = _relax(geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node)
+            r_pin[1] = -1
+    return n_inc
+
+
+@njit_leaf
 def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j,
                              extra, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the node's generators (gk, gid, gg: ng of them) with vertex generator j replaced by another
@@ -2198,26 +2223,28 @@ def _validate_chunk(
                             _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
                         n_inc = first_row
                 # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
-                # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
-                # from it, the second's must follow into its edge from its vertex
-                if ng != 2:
-                    continue
-                for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
-                    e_slide = ve_edge[slot]
-                    if not edge_mask[e_slide] or e_slide == extra:
+                # well (the contact on either edge reaches its vertex at once)
+                if ng == 2:
+                    n_inc = _swaths_leaving_both_vertices(
+                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                        gg, extra, g,
+                    )  # fmt: skip
+        # so do they where the edge is grazed between the two vertices (three generators on one line: a box's
+        # corner, the top edge of a box and the corner of a box floating beyond, aligned)
+        if ng == 2:
+            for g in range(first + 1, last):
+                n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
+                                      g_lo[g], g_hi[g], tol, extras)  # fmt: skip
+                for x in range(n_extra):
+                    if not edge_mask[extras[x]]:
                         continue
-                    for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
-                        e_pin = ve_edge[other]
-                        if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
-                            continue
-                        r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
-                        r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
-                        r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
-                        norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
-                        n_inc = _relax(
-                            geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
-                        )
-                        r_pin[1] = -1
+                    need = (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
+                    while n_inc + need > incidences.node.shape[0]:
+                        incidences = _grown(incidences, n_inc)
+                    n_inc = _swaths_leaving_both_vertices(
+                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                        gg, extras[x], g,
+                    )  # fmt: skip
 
         # an FXE node ends the EEE swath of the lines through its crossing point meeting its third edge: all
         # three generators are kept and the contact on the third edge slides either way
