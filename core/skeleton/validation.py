@@ -656,6 +656,27 @@ def _through_own_solid(kind_a, id_a, kind_b, id_b, element_solid, vf_off, vf_fac
 
 
 @njit_leaf
+def _plane_holds_generators(points, offsets, normals, vertices, edges, poly, r_kind, r_id, r_group, n_retained, tol):
+    """Whether two of the retained generators (r_kind, r_id, r_group: n_retained of them) met at different points
+    of the line lie in the polygon's plane (a vertex, or an edge with both ends, within tol of it)."""
+    normal = _row(normals, poly)
+    offset = -_dot(normal, _row(points, offsets[poly]))
+    group = -1
+    for j in range(n_retained):
+        if r_kind[j] == GEN_VERTEX:
+            inside = _near_plane(_row(vertices, r_id[j]), normal, offset, tol)
+        else:
+            inside = _near_plane(_row(vertices, edges[r_id[j], 0]), normal, offset, tol) and \
+                _near_plane(_row(vertices, edges[r_id[j], 1]), normal, offset, tol)  # fmt: skip
+        if not inside:
+            continue
+        if group >= 0 and r_group[j] != group:
+            return True
+        group = r_group[j]
+    return False
+
+
+@njit_leaf
 def _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
     """(a, b), a < b: two retained edges met at one point and not parallel (crossing there: objects in contact),
     else (-1, -1)."""
@@ -775,6 +796,23 @@ def _relaxed_arc(
         return n_inc
     if not _solve4(system, rhs, x):
         return n_inc
+    # two retained generators met at different points of the plane of a face the line slides over hold every
+    # line of the arc in that plane; the solved motion leaves it by rounding where their contacts are close
+    # together (the system is then nearly singular across the plane), enough to find a crossing of that face
+    # between them
+    for k in range(n_sliding):
+        if _plane_holds_generators(points, offsets, normals, vertices, edges, sl_poly[k], r_kind, r_id, r_group,
+                                   n_retained, tol):  # fmt: skip
+            n = _row(normals, sl_poly[k])
+            m1 = _dot(n, f1)
+            m2 = _dot(n, f2)
+            across = m1 * m1 + m2 * m2
+            if across > 0.0:
+                for base in (0, 2):
+                    out = (x[base] * m1 + x[base + 1] * m2) / across
+                    x[base] -= out * m1
+                    x[base + 1] -= out * m2
+            break
     beta = _combined(x[2], f1, x[3], f2)
     beta_len = np.sqrt(_dot(beta, beta))
     tilted = u
@@ -948,6 +986,17 @@ def _relaxed_arc(
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
                 return n_inc
+            # so does the other edge of a pencil's pair, met at its end vertex too (objects touching corner to
+            # corner): its contact slides along it off the corner as well
+            if crossed >= 0 and r_pin[norm_partner] >= 0:
+                d_crossed = _edge_direction(vertices, edges, crossed, -1)
+                c1 = _dot(d_crossed, f1)
+                c2 = _dot(d_crossed, f2)
+                if c1 * c1 + c2 * c2 <= 1e-24:
+                    return n_inc
+                slide_crossed = (_dot(delta, f1) * c1 + _dot(delta, f2) * c2) / (c1 * c1 + c2 * c2)
+                if slide_crossed * (1.0 if edges[crossed, 0] == r_pin[norm_partner] else -1.0) <= _SIDE_EPS:
+                    return n_inc
             generator_shift = slide * _dot(d, u)
             nearest = np.inf
             side = 1 if g == last else 0
@@ -1261,6 +1310,113 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
             n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
             r_pin[1] = -1
     return n_inc
+
+
+@njit_leaf
+def _swaths_leaving_both_vertices(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
+                                  ve_edge, gid, gg, extra, g):  # fmt: skip
+    """The EEE arcs of a line through two vertex generators gid[0], gid[1] (groups gg) and meeting edge `extra`
+    (group g): through `extra`, an edge of either vertex, the contacts on both moving into them from their
+    vertices (the first vertex's edge normalises the motion, the second's is pinned). Returns the next free row
+    (the caller leaves room for one per pair of edges)."""
+    r_kind, r_id, r_group, r_pin = retained
+    for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
+        e_slide = ve_edge[slot]
+        if not edge_mask[e_slide] or e_slide == extra:
+            continue
+        for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
+            e_pin = ve_edge[other]
+            if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
+                continue
+            r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
+            r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
+            r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
+            norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_slide, gid[0])
+            n_inc = _relax(geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node)
+            r_pin[1] = -1
+    return n_inc
+
+
+@njit_leaf
+def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j,
+                             extra, gk, gid, gg, ng):  # fmt: skip
+    """The arcs of the node's generators (gk, gid, gg: ng of them) with vertex generator j replaced by another
+    object's edge `extra` holding it, the contact sliding either way along that edge, and the pencils of that
+    junction (_pencils_at_junction). Returns the next free row (the caller leaves room for these rows)."""
+    r_kind, r_id, r_group, _ = retained
+    for k in range(ng):
+        r_kind[k] = GEN_EDGE if k == j else gk[k]
+        r_id[k] = extra if k == j else gid[k]
+        r_group[k] = gg[k]
+    norm_dir = _edge_direction(geometry.vertices, geometry.edges, extra, -1)
+    for sigma in (1.0, -1.0):
+        n_inc = _relax(geometry, line, retained, ng, j, norm_dir, sigma, scratch, incidences, n_inc, node)
+    return _pencils_at_junction(
+        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j], extra,
+        gk, gid, gg, ng,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask,
+                              ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
+    """The arcs of the pencils in the plane of vertex generator v's edge e_v and an edge e_w of another vertex w at
+    v's point (objects touching corner to corner: a chair leg's top corner under the seat's corner) about a
+    generator edge piercing that plane, when the node's line lies in it: their lines cross e_v and e_w near the
+    corner, both contacts moving into their edges from it, and pass through the corner on this line, where
+    both contacts reach their edge's end at once (no node through one of the vertices and the other edge names
+    them). gk, gid, gg: the node's ng generators and their groups. Returns (incidences, grown when full, and
+    the next free row)."""
+    g_ = geometry
+    vertices, edges, offsets = g_.vertices, g_.edges, g_.offsets
+    u = line.u
+    corner = _row(vertices, v)
+    for i in range(line.g_lo[group_v], line.g_hi[group_v]):
+        if line.c_kind[i] != CONTACT_VERTEX:
+            continue
+        w = corner_vertex[offsets[line.c_poly[i]] + line.c_local[i]]
+        if w == v:
+            continue
+        # once per vertex: each of its faces gives a contact
+        repeated = False
+        for earlier in range(line.g_lo[group_v], i):
+            repeated = repeated or (line.c_kind[earlier] == CONTACT_VERTEX and
+                                    corner_vertex[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == w)
+        if repeated:
+            continue
+        for slot_v in range(ve_off[v], ve_off[v + 1]):
+            e_v = ve_edge[slot_v]
+            if not edge_mask[e_v]:
+                continue
+            into_v = _edge_direction(vertices, edges, e_v, v)
+            for slot_w in range(ve_off[w], ve_off[w + 1]):
+                e_w = ve_edge[slot_w]
+                if not edge_mask[e_w]:
+                    continue
+                into_w = _edge_direction(vertices, edges, e_w, w)
+                normal = _cross(into_v, into_w)
+                length = np.sqrt(_dot(normal, normal))
+                # edges along each other span no plane; lines off the plane are no pencil of it
+                if length <= g_.angle_tol or abs(_dot(normal, u)) > g_.angle_tol * length:
+                    continue
+                # the lines run between their contacts within the angle of the two edges at the corner: where the
+                # objects touch there face against face, such lines are inside the solids
+                if _faces_meet_in(g_, e_v, e_w, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
+                    continue
+                for k in range(ng):
+                    if gk[k] != GEN_EDGE or \
+                            abs(_dot(_edge_direction(vertices, edges, gid[k], -1), normal)) <= g_.angle_tol * length:
+                        continue
+                    if n_inc + 1 > incidences.node.shape[0]:
+                        incidences = _grown(incidences, n_inc)
+                    r_kind, r_id, r_group, r_pin = retained
+                    r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
+                    r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
+                    r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_w, group_v, w
+                    n_inc = _relax(geometry, line, retained, 3, 1, into_v, 1.0, scratch, incidences, n_inc, node)
+                    r_pin[1] = -1
+                    r_pin[2] = -1
+    return incidences, n_inc
 
 
 @njit(cache=True)
@@ -1944,39 +2100,26 @@ def _validate_chunk(
         # a vertex generator lying on another element's edge (a box's corner on the room's floor edge, on the
         # top edge of the box it stands on, on the collinear edge of a box beside it): the arcs along that edge
         # through the vertex's point start or end here as well, so the vertex is replaced by the edge, sliding
-        # either way
+        # either way. Each such edge: the vertex may lie on a seam of collinear edges of boxes side by side
         for j in range(ng):
             if ng > 3 or gk[j] != GEN_VERTEX:
                 continue
             g = gg[j]
-            extra = -1
             for i in range(g_lo[g], g_hi[g]):
                 if c_kind[i] != CONTACT_EDGE:
                     continue
-                e = corner_edge[offsets[c_poly[i]] + c_local[i]]
-                if edge_mask[e] and edges[e, 0] != gid[j] and edges[e, 1] != gid[j]:
-                    extra = e
-                    break
-            if extra < 0:
-                continue
-            n_retained = 0
-            norm = -1
-            for k in range(ng):
-                r_kind[n_retained] = GEN_EDGE if k == j else gk[k]
-                r_id[n_retained] = extra if k == j else gid[k]
-                r_group[n_retained] = gg[k]
-                if k == j:
-                    norm = n_retained
-                n_retained += 1
-            norm_dir = _edge_direction(vertices, edges, extra, -1)
-            for sigma in (1.0, -1.0):
-                n_inc = _relax(
-                    geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
-                )
-            n_inc = _pencils_at_junction(
-                geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j],
-                extra, gk, gid, gg, ng,
-            )  # fmt: skip
+                extra = corner_edge[offsets[c_poly[i]] + c_local[i]]
+                if not edge_mask[extra] or edges[extra, 0] == gid[j] or edges[extra, 1] == gid[j] or \
+                        _edge_met_before(line, corner_edge, offsets, g, i, extra):  # fmt: skip
+                    continue
+                # the relaxed arcs and the junction's pencils (an edge of the vertex by a pivot edge)
+                need = 2 + 3 * (ve_off[gid[j] + 1] - ve_off[gid[j]])
+                while n_inc + need > incidences.node.shape[0]:
+                    incidences = _grown(incidences, n_inc)
+                n_inc = _vertex_replaced_by_edge(
+                    geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j, extra,
+                    gk, gid, gg, ng,
+                )  # fmt: skip
         # the other swaths through a junction's line (the lines through its vertex meeting the other edge) pass
         # it: no node ends them there
         if junction:
@@ -1984,7 +2127,9 @@ def _validate_chunk(
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
         # object's edge crosses on that edge (the bottom edge of a box stacked across it): see _arcs_off_edge;
-        # or along another object's edge holding the vertex: see _pencils_to_vertex_on_edge
+        # in the plane of an edge of it and an edge of another object's corner at its point: see
+        # _pencils_at_shared_corner; or along another object's edge holding the vertex: see
+        # _pencils_to_vertex_on_edge
         for j in range(ng):
             if gk[j] != GEN_VERTEX:
                 continue
@@ -2000,6 +2145,10 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
+            incidences, n_inc = _pencils_at_shared_corner(
+                geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
+                v, gg[j], gk, gid, gg, ng,
+            )  # fmt: skip
             if n_sliding > 0:
                 incidences, n_inc = _pencils_to_vertex_on_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
@@ -2074,26 +2223,28 @@ def _validate_chunk(
                             _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
                         n_inc = first_row
                 # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
-                # well (the contact on either edge reaches its vertex at once); the first vertex's edge slides away
-                # from it, the second's must follow into its edge from its vertex
-                if ng != 2:
-                    continue
-                for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
-                    e_slide = ve_edge[slot]
-                    if not edge_mask[e_slide] or e_slide == extra:
+                # well (the contact on either edge reaches its vertex at once)
+                if ng == 2:
+                    n_inc = _swaths_leaving_both_vertices(
+                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                        gg, extra, g,
+                    )  # fmt: skip
+        # so do they where the edge is grazed between the two vertices (three generators on one line: a box's
+        # corner, the top edge of a box and the corner of a box floating beyond, aligned)
+        if ng == 2:
+            for g in range(first + 1, last):
+                n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
+                                      g_lo[g], g_hi[g], tol, extras)  # fmt: skip
+                for x in range(n_extra):
+                    if not edge_mask[extras[x]]:
                         continue
-                    for other in range(ve_off[gid[1]], ve_off[gid[1] + 1]):
-                        e_pin = ve_edge[other]
-                        if not edge_mask[e_pin] or e_pin == extra or e_pin == e_slide:
-                            continue
-                        r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
-                        r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
-                        r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
-                        norm_dir = _edge_direction(vertices, edges, e_slide, gid[0])
-                        n_inc = _relax(
-                            geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node
-                        )
-                        r_pin[1] = -1
+                    need = (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
+                    while n_inc + need > incidences.node.shape[0]:
+                        incidences = _grown(incidences, n_inc)
+                    n_inc = _swaths_leaving_both_vertices(
+                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                        gg, extras[x], g,
+                    )  # fmt: skip
 
         # an FXE node ends the EEE swath of the lines through its crossing point meeting its third edge: all
         # three generators are kept and the contact on the third edge slides either way
