@@ -124,6 +124,7 @@ def construction(build_skeleton, sizes, show_progress: bool):
                 "arcs": arcs,
                 "nodes_total": sum(nodes.values()),
                 "arcs_total": sum(arcs.values()),
+                "dangling_arcs": int(stats.get("dangling_arcs", 0)),
                 "skeleton_mb": float(stats.get("bytes", 0)) / MB,
                 "peak_mb": peak / MB,
                 "peak_above_baseline_mb": (peak - before) / MB,
@@ -325,9 +326,8 @@ def main(argv) -> int:
     print_table(
         table,
         ["polygons", "seconds", *[f"node {k}" for k in node_kinds], "nodes_total", *[f"arc {k}" for k in arc_kinds],
-         "arcs_total", "skeleton_mb", "peak_mb", "peak_above_baseline_mb", "paper_seconds", "paper_mb", "paper_nodes_k",
-         "paper_arcs_k",
-         "speed_up"],
+         "arcs_total", "dangling_arcs", "skeleton_mb", "peak_mb", "peak_above_baseline_mb", "paper_seconds",
+         "paper_mb", "paper_nodes_k", "paper_arcs_k", "speed_up"],
         title="Visibility Skeleton construction on the office family (paper: seed 003 Table 1, 195 MHz R10000)",
     )
     exponent = growth_exponent(rows)
