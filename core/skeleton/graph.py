@@ -67,28 +67,18 @@ def coincident_nodes(
     # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene. Each line
     # is entered with its largest direction component positive; two directions within the radius have the
     # same largest component unless the two largest of either tie within twice the radius (a diagonal): those
-    # lines are entered with both orientations. Keys are written in place, the peak memory of a build
-    magnitude = np.sort(np.abs(direction), axis=1)
-    tied = np.flatnonzero(magnitude[:, 2] - magnitude[:, 1] <= 2.0 * radius)
-    del magnitude
-    keys = np.empty((n + len(tied), 6))
-    keys[:n, :3] = start
-    keys[:n, :3] -= np.einsum("ij,ij->i", start, direction)[:, None] * direction
-    keys[:n, :3] /= scale
-    keys[:n, 3:] = direction
-    flip = np.take_along_axis(direction, np.abs(direction).argmax(axis=1)[:, None], axis=1)[:, 0] < 0.0
-    np.negative(keys[:n, 3:], out=keys[:n, 3:], where=flip[:, None])
-    del flip
-    keys[n:, :3] = keys[tied, :3]
-    keys[n:, 3:] = -keys[tied, 3:]
+    # lines are entered with both orientations (keys n.. stand for the tied lines). Only the keys that may
+    # have another within the radius (about half) go into the tree; the others are lines of one node, found
+    # from the keys' projections alone: all keys at once would set the peak memory of a build
+    tied = np.flatnonzero(_tied_lines(direction, 2.0 * radius))
     bound = np.nextafter(radius, np.inf)
-    # only the keys that may have another within the radius go into the tree, moved to the front of `keys`:
-    # the others (about half) are lines of one node
-    suspects = _maybe_near(keys, bound)
-    _gather_rows(keys, suspects)
+    projection, largest = _key_projections(start, direction, scale, tied, _PROJECTION)
+    suspects = _maybe_near(projection, largest, bound)
+    del projection
+    keys = _line_keys(start, direction, scale, tied, suspects)
     # sliding midpoint splits: built faster than median ones, and searched as fast for these keys
-    tree = cKDTree(keys[: len(suspects)], balanced_tree=False)
-    key_of_row = np.append(suspects, len(keys))
+    tree = cKDTree(keys, balanced_tree=False)
+    key_of_row = np.append(suspects, n + len(tied))
     parent = np.arange(n, dtype=np.int32)
     # the neighbours within the radius of a block of keys at a time, the nearest k first, then more for the
     # keys with k of them, in smaller blocks: a line through many generators has many duplicates, and all pairs
@@ -111,19 +101,75 @@ def coincident_nodes(
 _PROJECTION = 1.0 / np.sqrt(np.array([2.0, 3.0, 5.0, 7.0, 11.0, 13.0]))
 
 
-def _maybe_near(keys: np.ndarray, bound: float) -> np.ndarray:
-    """Sorted (S,) int64: the keys (K, 6) float64 that may have another key closer than bound. Keys that
-    close project within |_PROJECTION| bound of each other (plus rounding), so the others have no neighbour
-    in projection order within that much: they are left out."""
-    # einsum's own loop, not BLAS: a BLAS product this large wakes OpenBLAS's threads, which then spin for
-    # tens of milliseconds on the cores the build runs on
-    projection = np.einsum("ij,j->i", keys, _PROJECTION)
+def _maybe_near(projection: np.ndarray, largest: float, bound: float) -> np.ndarray:
+    """Sorted (S,) int64: the keys that may have another key closer than bound, from their projections (K,)
+    float64 (keys . _PROJECTION) and the largest magnitude of any key coordinate. Keys that close project
+    within |_PROJECTION| bound of each other (plus rounding), so the others have no neighbour in projection
+    order within that much: they are left out."""
     order = np.argsort(projection)
-    largest = max(float(keys.max(initial=0.0)), -float(keys.min(initial=0.0)))
     width = np.linalg.norm(_PROJECTION) * bound * (1.0 + 1e-6) + 64.0 * np.finfo(float).eps * (
         np.abs(_PROJECTION).sum() * largest
     )
     return np.flatnonzero(_close_in_order(projection, order, width))
+
+
+@njit(cache=True)
+def _tied_lines(direction, gap):
+    """(N,) bool: the unit directions (N, 3) whose two largest components in magnitude differ by gap or less."""
+    tied = np.empty(direction.shape[0], dtype=np.bool_)
+    for i in range(direction.shape[0]):
+        a, b, c = abs(direction[i, 0]), abs(direction[i, 1]), abs(direction[i, 2])
+        top = max(a, b, c)
+        second = max(min(a, b), min(max(a, b), c))
+        tied[i] = top - second <= gap
+    return tied
+
+
+@njit(cache=True)
+def _write_key(start, direction, scale, line, negate, out):
+    """The key (6,) of a line (see coincident_nodes) into out: its foot over scale, then its direction with
+    the largest component positive (the other orientation when negate)."""
+    along = 0.0
+    for k in range(3):
+        along += start[line, k] * direction[line, k]
+    largest = 0
+    for k in range(1, 3):
+        if abs(direction[line, k]) > abs(direction[line, largest]):
+            largest = k
+    sign = -1.0 if (direction[line, largest] < 0.0) != negate else 1.0
+    for k in range(3):
+        out[k] = (start[line, k] - along * direction[line, k]) / scale
+        out[3 + k] = sign * direction[line, k]
+
+
+@njit(cache=True)
+def _key_projections(start, direction, scale, tied, projection_axis):
+    """((N + T,) float64, float): each key's projection on projection_axis (6,) (keys N.. the tied lines (T,)
+    int64 in their other orientation) and the largest magnitude of any key coordinate."""
+    n = start.shape[0]
+    projection = np.empty(n + tied.shape[0])
+    key = np.empty(6)
+    largest = 0.0
+    for row in range(n + tied.shape[0]):
+        _write_key(start, direction, scale, row if row < n else tied[row - n], row >= n, key)
+        total = 0.0
+        for k in range(6):
+            total += key[k] * projection_axis[k]
+            largest = max(largest, abs(key[k]))
+        projection[row] = total
+    return projection, largest
+
+
+@njit(cache=True)
+def _line_keys(start, direction, scale, tied, rows):
+    """(R, 6) float64 the keys of rows (R,) int64 (rows N.. the tied lines (T,) int64 in their other
+    orientation)."""
+    n = start.shape[0]
+    keys = np.empty((rows.shape[0], 6))
+    for i in range(rows.shape[0]):
+        row = rows[i]
+        _write_key(start, direction, scale, row if row < n else tied[row - n], row >= n, keys[i])
+    return keys
 
 
 @njit(cache=True)
@@ -135,14 +181,6 @@ def _close_in_order(values, order, width):
             close[order[i]] = True
             close[order[i + 1]] = True
     return close
-
-
-@njit(cache=True)
-def _gather_rows(rows, ids):
-    """rows[:len(ids)] = rows[ids] in place; ids (S,) increasing, so no row is read after being written."""
-    for i in range(ids.shape[0]):
-        if ids[i] != i:
-            rows[i] = rows[ids[i]]
 
 
 #: neighbours (keys times k) one cKDTree.query looks for

@@ -30,7 +30,7 @@ from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
-from .graph import assemble_arcs, coincident_nodes
+from .graph import Arcs, assemble_arcs, coincident_nodes
 from .topology import scene_topology
 from .validation import (
     ARC_EV,
@@ -197,29 +197,29 @@ class Skeleton:
         nodes = _concatenated(NodeChunk, self._node_parts)
         _return_free_memory()
         node_line = coincident_nodes(nodes.start, nodes.direction, scene.diagonal, scene.tol.length, WORKERS)
-        complete = self.sources is None
-        if complete:
-            # no later build merges nodes or pairs incidences: the duplicates go before the incidences are joined
+        edge_tol = _edge_tolerance(scene)
+        if self.sources is None:
+            # no later build merges nodes or pairs incidences: the duplicates go before the arcs are assembled,
+            # and the incidences as they are
             columns = dict(vars(nodes))
             del nodes
             nodes, node_id = _one_node_per_line(columns, node_line)
             del node_line
-        else:
-            node_id = node_line
-        _return_free_memory()
-        incidences = _concatenated(IncidenceChunk, self._incidence_parts)
-        _return_free_memory()
-        self.arcs = assemble_arcs(
-            incidences.kind, incidences.codes, incidences.end, incidences.s, incidences.direction,
-            node_id[incidences.node], _edge_tolerance(scene), scene.n_vertices,
-        )  # fmt: skip
-        if complete:
-            del incidences, node_id
+            _return_free_memory()
+            self.arcs = _arcs_by_key_range(
+                self._incidence_parts, node_id, edge_tol, scene.n_vertices, len(scene.edges), release=True
+            )
+            del node_id
             self.node_line = None
         else:
-            self._node_parts = [nodes]
+            incidences = _concatenated(IncidenceChunk, self._incidence_parts)
+            _return_free_memory()
             self._incidence_parts = [incidences]
-            self.node_line = node_id
+            self.arcs = _arcs_by_key_range(
+                [incidences], node_line, edge_tol, scene.n_vertices, len(scene.edges), release=False
+            )
+            self._node_parts = [nodes]
+            self.node_line = node_line
         self._n_nodes = len(nodes)
         self.nodes = nodes
         _return_free_memory()
@@ -618,7 +618,7 @@ def _edge_tolerance(scene: Scene) -> np.ndarray:
 _EMPTY = {
     NodeChunk: lambda: NodeChunk(
         np.empty(0, np.int8), np.zeros((0, 4), np.int8), np.full((0, 4), -1, np.int32), np.empty((0, 3)),
-        np.empty((0, 3)), np.empty((0, 4)), np.empty((0, 2), np.int32),
+        np.empty((0, 3)), np.empty((0, 2), np.int32), np.empty((0, 2)),
     ),
     IncidenceChunk: lambda: IncidenceChunk(
         np.empty(0, np.int32), np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32),
@@ -642,6 +642,51 @@ def _concatenated(chunk_type, parts: list):
         joined[name] = np.concatenate(columns.pop(name))
         _return_free_memory()
     return chunk_type(**joined)
+
+
+#: incidences assembled into arcs at a time (see _arcs_by_key_range)
+_ASSEMBLED_AT_ONCE = 1 << 20
+
+
+def _arcs_by_key_range(parts: list, node_id, edge_tol, n_vertices: int, n_edges: int, release: bool) -> Arcs:
+    """The arcs (core.skeleton.graph.assemble_arcs) of the incidences of `parts` (IncidenceChunk, their node
+    ids mapped through node_id (N,) int32), assembled for one range of keys (kind, first generator) at a time:
+    arcs are sorted by their key first, so the pieces joined in order are the arcs of all incidences at once.
+    When `release`, each piece's rows leave `parts` once assembled (emptied at the end): all incidences, their
+    sort and all arcs at once would set the peak memory of a build."""
+    n_codes = n_vertices + n_edges
+    counts = np.zeros(len(ARC_NAMES) * n_codes, dtype=np.int64)
+    for part in parts:
+        counts += np.bincount(_key_prefix(part, n_codes), minlength=len(counts))
+    cumulative = np.concatenate([[0], np.cumsum(counts)])
+    pieces = max(1, -(-int(cumulative[-1]) // _ASSEMBLED_AT_ONCE))
+    bounds = np.unique(np.searchsorted(cumulative, np.linspace(0, cumulative[-1], pieces + 1)[1:-1]))
+    bounds = [0, *bounds.tolist(), len(counts)]
+    arcs = []
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        taken = []
+        for i, part in enumerate(parts):
+            prefix = _key_prefix(part, n_codes)
+            inside = (prefix >= lo) & (prefix < hi)
+            del prefix
+            taken.append(IncidenceChunk(*(getattr(part, f.name)[inside] for f in fields(IncidenceChunk))))
+            if release:
+                parts[i] = IncidenceChunk(*(getattr(part, f.name)[~inside] for f in fields(IncidenceChunk)))
+            del part, inside
+        piece = _concatenated(IncidenceChunk, taken)
+        arcs.append(assemble_arcs(
+            piece.kind, piece.codes, piece.end, piece.s, piece.direction, node_id[piece.node], edge_tol, n_vertices,
+        ))  # fmt: skip
+        del piece
+        _return_free_memory()
+    if release:
+        parts.clear()
+    return _concatenated(Arcs, arcs)
+
+
+def _key_prefix(part, n_codes: int) -> np.ndarray:
+    """(M,) int64 the leading part of each incidence's arc key: kind, then its first generator."""
+    return part.kind.astype(np.int64) * n_codes + part.codes[:, 0]
 
 
 def _one_node_per_line(columns: dict, node_line: np.ndarray) -> tuple[NodeChunk, np.ndarray]:
@@ -725,9 +770,11 @@ def _polygons_of_groups(topology, groups: np.ndarray) -> np.ndarray:
 def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, n_groups, workers):
     """The arcs joining each pair of surfaces (face groups), CSR: first (P,) int32 < second (P,) int32 the
     distinct pairs sorted by first then second, offsets (P + 1,) int64 into arcs (R,) int32, each pair's arcs
-    in increasing order. Filled by a counting sort on the first surface: a sort on (pair, arc) rows would
-    hold several copies of them, the largest arrays of a build. Consecutive slices of the arcs, then of the
-    surfaces, are shared among `workers` threads; the result does not depend on how many."""
+    in increasing order. Filled by a counting sort on the first surface, then each first surface's rows by a
+    counting sort on the second, found again from the arc: the second surface of every row at once, or a sort
+    on (pair, arc) rows, would hold arrays as large as the index, the largest of a build. Consecutive slices
+    of the arcs, then of the surfaces, are shared among `workers` threads; the result does not depend on how
+    many."""
     geometry = (kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group)
     arc_slices = _even_slices(kind.shape[0], workers)
     counts = _on_threads(lambda lo, hi: _pair_counts(lo, hi, *geometry, n_groups), arc_slices)
@@ -739,19 +786,14 @@ def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
     for (lo, _), count in zip(arc_slices, counts, strict=True):
         fill[lo] = before.copy()
         before += count
-    second = np.empty(bucket[-1], dtype=np.int32)
     arcs = np.empty(bucket[-1], dtype=np.int32)
-    _on_threads(lambda lo, hi: _pair_fill(lo, hi, *geometry, fill[lo], second, arcs), arc_slices)
-    group_slices = _slices(bucket, workers)
-    pairs = _on_threads(lambda lo, hi: _sort_pairs(lo, hi, bucket, second, arcs, n_groups), group_slices)
-    pair_start = {lo: start for (lo, _), start in zip(group_slices, np.cumsum([0, *pairs[:-1]]), strict=True)}
-    first = np.empty(sum(pairs), dtype=np.int32)
-    distinct = np.empty(sum(pairs), dtype=np.int32)
-    offsets = np.empty(sum(pairs) + 1, dtype=np.int64)
-    _on_threads(lambda lo, hi: _pair_rows(lo, hi, bucket, second, pair_start[lo], first, distinct, offsets),
-                group_slices)  # fmt: skip
-    offsets[-1] = len(arcs)
-    return first, distinct, offsets, arcs
+    _on_threads(lambda lo, hi: _pair_fill(lo, hi, *geometry, fill[lo], arcs), arc_slices)
+    pairs = _on_threads(lambda lo, hi: _sort_pairs(lo, hi, *geometry, bucket, arcs, n_groups),
+                        _slices(bucket, workers))  # fmt: skip
+    first = np.concatenate([found[0] for found in pairs])
+    second = np.concatenate([found[1] for found in pairs])
+    offsets = np.concatenate([*(found[2] for found in pairs), [len(arcs)]])
+    return first, second, offsets, arcs
 
 
 @njit(cache=True, nogil=True)
@@ -768,41 +810,57 @@ def _pair_counts(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off,
 
 
 @njit(cache=True, nogil=True)
-def _pair_fill(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, fill, second,
-               arcs):
-    """The rows (second surface, arc) of arcs lo..hi-1, each at its first surface's next row (fill (G,) int64)."""
+def _pair_fill(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, fill, arcs):
+    """Arcs lo..hi-1 into their rows, one per pair, each at its first surface's next row (fill (G,) int64): an
+    arc's rows of one first surface are consecutive, in the order _arc_pairs finds its pairs."""
     touched = np.empty((2, 64), dtype=np.int64)
     found = np.empty((2, 64 * 64), dtype=np.int64)
     for arc in range(lo, hi):
         for k in range(_arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
                                   face_group, touched, found)):  # fmt: skip
-            row = fill[found[0, k]]
-            second[row] = found[1, k]
-            arcs[row] = arc
+            arcs[fill[found[0, k]]] = arc
             fill[found[0, k]] += 1
 
 
 @njit(cache=True, nogil=True)
-def _sort_pairs(lo, hi, bucket, second, arcs, n_groups):
+def _sort_pairs(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, bucket, arcs,
+                n_groups):  # fmt: skip
     """Sort the rows of first surfaces lo..hi-1 (bucket (G+1,) int64: their first rows) by second surface,
-    stably (each pair's arcs stay in increasing order); returns how many distinct pairs they hold. A counting
-    sort over the second surfaces each first one meets."""
+    stably (each pair's arcs stay in increasing order), by counting over the second surfaces each first one
+    meets; returns the distinct pairs among them: first, second (K,) int32 and their first rows (K,) int64."""
+    touched = np.empty((2, 64), dtype=np.int64)
+    found = np.empty((2, 64 * 64), dtype=np.int64)
     row_of = np.zeros(n_groups, dtype=np.int64)
     seen = np.empty(n_groups, dtype=np.int32)
     longest = 0
     for group in range(lo, hi):
         longest = max(longest, bucket[group + 1] - bucket[group])
+    row_second = np.empty(longest, dtype=np.int32)
     moved_second = np.empty(longest, dtype=np.int32)
     moved_arcs = np.empty(longest, dtype=np.int32)
+    pair_first = np.empty(16, dtype=np.int32)
+    pair_second = np.empty(16, dtype=np.int32)
+    pair_row = np.empty(16, dtype=np.int64)
     n_pairs = 0
     for group in range(lo, hi):
         first_row, end_row = bucket[group], bucket[group + 1]
         n_seen = 0
+        n_found = 0
+        next_found = 0
         for row in range(first_row, end_row):
-            if row_of[second[row]] == 0:
-                seen[n_seen] = second[row]
+            if row == first_row or arcs[row] != arcs[row - 1]:
+                n_found = _arc_pairs(arcs[row], kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
+                                     face_group, touched, found)  # fmt: skip
+                next_found = 0
+            while next_found < n_found - 1 and found[0, next_found] != group:
+                next_found += 1
+            second = found[1, next_found]
+            next_found += 1
+            row_second[row - first_row] = second
+            if row_of[second] == 0:
+                seen[n_seen] = second
                 n_seen += 1
-            row_of[second[row]] += 1
+            row_of[second] += 1
         seen[:n_seen].sort()
         # each second surface's first row among the group's
         start = 0
@@ -811,29 +869,34 @@ def _sort_pairs(lo, hi, bucket, second, arcs, n_groups):
             row_of[seen[k]] = start
             start += rows
         for row in range(first_row, end_row):
-            target = row_of[second[row]]
-            moved_second[target] = second[row]
+            second = row_second[row - first_row]
+            target = row_of[second]
+            moved_second[target] = second
             moved_arcs[target] = arcs[row]
-            row_of[second[row]] = target + 1
-        second[first_row:end_row] = moved_second[: end_row - first_row]
+            row_of[second] = target + 1
         arcs[first_row:end_row] = moved_arcs[: end_row - first_row]
+        if n_pairs + n_seen > pair_first.shape[0]:
+            size = max(2 * pair_first.shape[0], n_pairs + n_seen)
+            pair_first = _resized(pair_first, size)
+            pair_second = _resized(pair_second, size)
+            pair_row = _resized(pair_row, size)
+        for row in range(end_row - first_row):
+            if row == 0 or moved_second[row] != moved_second[row - 1]:
+                pair_first[n_pairs] = group
+                pair_second[n_pairs] = moved_second[row]
+                pair_row[n_pairs] = first_row + row
+                n_pairs += 1
         for k in range(n_seen):
             row_of[seen[k]] = 0
-        n_pairs += n_seen
-    return n_pairs
+    return pair_first[:n_pairs].copy(), pair_second[:n_pairs].copy(), pair_row[:n_pairs].copy()
 
 
-@njit(cache=True, nogil=True)
-def _pair_rows(lo, hi, bucket, second, pair, first, distinct, offsets):
-    """The distinct pairs of first surfaces lo..hi-1, from index `pair` on: first, distinct (P,) int32 and
-    offsets (P+1,) int64 their first rows."""
-    for group in range(lo, hi):
-        for row in range(bucket[group], bucket[group + 1]):
-            if row == bucket[group] or second[row] != second[row - 1]:
-                first[pair] = group
-                distinct[pair] = second[row]
-                offsets[pair] = row
-                pair += 1
+@njit(cache=True)
+def _resized(values, size):
+    """values (K,) copied into a new array of `size` >= K rows."""
+    out = np.empty(size, dtype=values.dtype)
+    out[: values.shape[0]] = values
+    return out
 
 
 @njit_leaf

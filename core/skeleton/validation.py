@@ -1819,7 +1819,7 @@ def _validate_chunk(
     node_gid = np.full((n_cand, 4), -1, dtype=np.int64)
     node_start = np.empty((n_cand, 3))
     node_dir = np.empty((n_cand, 3))
-    node_tau = np.zeros((n_cand, 4))
+    node_reach = np.empty((n_cand, 2))
     node_end = np.empty((n_cand, 2), dtype=np.int64)
     incidences = _Incidences(
         np.empty(bound, dtype=np.int64), np.empty(bound, dtype=np.int8), np.empty((bound, 3), dtype=np.int64),
@@ -2070,18 +2070,19 @@ def _validate_chunk(
         for j in range(ng):
             node_gkind[node, j] = gk[j]
             node_gid[node, j] = gid[j]
-            node_tau[node, j] = g_tau[gg[j]]
         for k in range(3):
             node_start[node, k] = start[k]
             node_dir[node, k] = u[k]
         for side in range(2):
             outer = first if side == 0 else last
             node_end[node, side] = END_FREE
+            node_reach[node, side] = -np.inf if side == 0 else np.inf
             if _group_blocked(
                 points, offsets, normals, c_poly, c_kind, c_local, g_lo[outer], g_hi[outer], u, angle_tol,
                 arc_start, arc_len, bounds,
             ):  # fmt: skip
                 node_end[node, side] = END_TERMINAL
+                node_reach[node, side] = g_tau[outer]
                 continue
             g = outer - 1 if side == 0 else outer + 1
             while 0 <= g < n_groups:
@@ -2090,6 +2091,7 @@ def _validate_chunk(
                     arc_start, arc_len, bounds,
                 ):  # fmt: skip
                     node_end[node, side] = face_group[c_poly[g_lo[g]]]
+                    node_reach[node, side] = g_tau[g]
                     break
                 g = g - 1 if side == 0 else g + 1
 
@@ -2327,7 +2329,7 @@ def _validate_chunk(
                 break
     return (
         node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
-        node_dir[:n_nodes], node_tau[:n_nodes], node_end[:n_nodes],
+        node_dir[:n_nodes], node_reach[:n_nodes], node_end[:n_nodes],
         incidences.node[:n_inc], incidences.kind[:n_inc], incidences.codes[:n_inc], incidences.end[:n_inc],
         incidences.s[:n_inc], incidences.direction[:n_inc], counters,
     )  # fmt: skip
@@ -2438,13 +2440,13 @@ def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 
         np.ascontiguousarray(candidates.direction[lo:hi], dtype=np.float64),
         scene.bbox_min - grown, scene.bbox_max + grown,
     )  # fmt: skip
-    (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_tau, n_end,
+    (n_cand, n_kind, n_gkind, n_gid, n_start, n_dir, n_reach, n_end,
      i_node, i_kind, i_codes, i_end, i_s, i_dir, counters) = result  # fmt: skip
     # the kernel returns the used part of buffers sized for the worst case: copies let those go (ids, codes
     # and face groups in int32)
     nodes = NodeChunk(
-        n_kind.copy(), n_gkind.copy(), n_gid.astype(np.int32), n_start.copy(), n_dir.copy(), n_tau.copy(),
-        n_end.astype(np.int32),
+        n_kind.copy(), n_gkind.copy(), n_gid.astype(np.int32), n_start.copy(), n_dir.copy(), n_end.astype(np.int32),
+        n_reach.copy(),
     )  # fmt: skip
     incidences = IncidenceChunk(
         i_node.copy(), i_kind.copy(), i_codes.astype(np.int32), i_end.astype(np.int32), i_s.copy(), i_dir.copy()
@@ -2456,16 +2458,17 @@ def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 
 class NodeChunk:
     """N validated nodes. kind (N,) int8 NODE_*; gen_kind (N, 4) int8 GEN_* and gen_id (N, 4) int32, the
     generators in line order (GEN_NONE / -1 padded); start (N, 3), direction (N, 3) unit: the line is
-    start + tau direction; tau (N, 4) each generator's position; end (N, 2) int32 the face groups met beyond
-    the first and the last generator (END_TERMINAL when the line stops on it, END_FREE when it leaves)."""
+    start + tau direction; end (N, 2) int32 the face groups met beyond the first and the last generator
+    (END_TERMINAL when the line stops on it, END_FREE when it leaves); reach (N, 2) float64 the tau of those
+    points, seed 003's P_down and P_up (the outer generator's own when terminal, -inf / +inf when free)."""
 
     kind: np.ndarray
     gen_kind: np.ndarray
     gen_id: np.ndarray
     start: np.ndarray
     direction: np.ndarray
-    tau: np.ndarray
     end: np.ndarray
+    reach: np.ndarray
 
     def __len__(self) -> int:
         return len(self.kind)

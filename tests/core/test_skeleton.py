@@ -18,7 +18,7 @@ import pytest
 
 from core.scene import Scene
 from core.skeleton import build_skeleton
-from core.skeleton.validation import ARC_EV
+from core.skeleton.validation import ARC_EV, END_FREE, END_TERMINAL, GEN_NONE, GEN_VERTEX
 from core.visibility import exact_form_factors
 from tests.core.furnished_rooms import box_quads, furnished_room
 from tests.core.naive_skeleton import swath_line
@@ -328,6 +328,39 @@ def test_arc_lines_end_on_the_front_of_their_end_faces(name):
                 checked += 1
                 assert front, f"arc {arc} {codes} ends on face group {group} from behind"
     assert checked > 0
+
+
+@pytest.mark.parametrize("name", ["generic room 0", "box on box", "furnished room 0"])
+def test_nodes_store_where_their_line_is_blocked(name):
+    """Each node keeps seed 003's P_down and P_up: past its outer generators, on a face of the face group it
+    ends on; at the outer generator itself when the line stops there; at infinity when it leaves the scene."""
+    skeleton = _skeleton(name)
+    scene, nodes, groups = skeleton.scene, skeleton.nodes, skeleton.topology.face_group
+    tol = 10.0 * scene.tol.length
+    blocked = 0
+    for node in range(len(nodes)):
+        used = nodes.gen_kind[node] != GEN_NONE
+        codes = np.where(nodes.gen_kind[node][used] == GEN_VERTEX, 0, scene.n_vertices) + nodes.gen_id[node][used]
+        start, direction = nodes.start[node], nodes.direction[node]
+        along = sorted(_along_line(scene, int(code), start, direction) for code in codes)
+        for side, (outer, outward) in enumerate([(along[0], -1.0), (along[-1], 1.0)]):
+            end, reach = nodes.end[node, side], nodes.reach[node, side]
+            if end == END_FREE:
+                assert reach == outward * np.inf, f"node {node}: free end {side} at {reach}"
+            elif end == END_TERMINAL:
+                assert abs(reach - outer) <= tol, f"node {node}: terminal end {side} {reach} off its generator"
+            else:
+                blocked += 1
+                assert outward * (reach - outer) >= -tol, f"node {node}: end {side} {reach} before {outer}"
+                point = start + reach * direction
+                faces = np.flatnonzero(groups == end)
+                on_face = [
+                    abs(scene.normals[f] @ point + scene.plane_offsets[f]) <= tol
+                    and _strictly_inside(scene, int(f), point, -tol)
+                    for f in faces
+                ]
+                assert any(on_face), f"node {node}: end {side} at {point} on no face of group {end}"
+    assert blocked > 0
 
 
 def _along_line(scene: Scene, code: int, point: np.ndarray, direction: np.ndarray) -> float:
@@ -719,8 +752,14 @@ def test_coincident_nodes_merge_one_line_only():
     turned = direction[1] + 10.0 * tol / scale * np.cross(direction[1], [1.0, 0.0, 0.0])
     starts = np.vstack([start, moved, start[0] + 10.0 * tol * side / np.linalg.norm(side), start[1]])
     directions = np.vstack([direction, signs * direction, direction[0], turned / np.linalg.norm(turned)])
+    # nodes 14, 15: one diagonal line whose two largest direction components swap between its nodes, the
+    # second node reversed: each is entered with both orientations
+    diagonal = np.array([1.0, -1.0 - 1e-11, 0.3]) / np.linalg.norm([1.0, 1.0 + 1e-11, 0.3])
+    swapped = -np.array([1.0 + 1e-11, -1.0, 0.3]) / np.linalg.norm([1.0 + 1e-11, 1.0, 0.3])
+    starts = np.vstack([starts, [1.0, -2.0, 0.5], np.array([1.0, -2.0, 0.5]) + 2.0 * diagonal])
+    directions = np.vstack([directions, diagonal, swapped])
     line = coincident_nodes(starts, directions, scale, tol)
-    np.testing.assert_array_equal(line, [0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 12, 13])
+    np.testing.assert_array_equal(line, [0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 12, 13, 14, 14])
 
 
 @pytest.mark.parametrize("name", ["box overhanging", "lamp table"])
@@ -743,6 +782,21 @@ def test_arc_cuts_do_not_depend_on_the_index_or_the_threads(name):
         for indexed, expected in zip(_arc_cuts(*arguments, workers, 0), every_node, strict=True):
             assert indexed.dtype == expected.dtype
             np.testing.assert_array_equal(indexed, expected)
+
+
+@pytest.mark.parametrize("name", ["furnished room 0", "box overhanging a corner"])
+def test_arcs_assembled_by_key_range_are_those_assembled_at_once(name, monkeypatch):
+    """Arcs assembled about a hundred incidences at a time (by ranges of kind and first generator), releasing the
+    incidences as they go, are the arcs assembled from all incidences at once, in the same order."""
+    import core.skeleton.skeleton as skeleton_module
+
+    whole = _skeleton(name)
+    monkeypatch.setattr(skeleton_module, "_ASSEMBLED_AT_ONCE", 100)
+    pieces = build_skeleton(_scene(name))
+    assert 2 * len(pieces.arcs) > 5 * 100
+    for field in ("kind", "codes", "node", "s", "ends"):
+        np.testing.assert_array_equal(getattr(pieces.arcs, field), getattr(whole.arcs, field), err_msg=field)
+    np.testing.assert_array_equal(pieces._pair_arcs, whole._pair_arcs)
 
 
 def test_incidences_sort_as_lexsort_does():
@@ -770,7 +824,7 @@ def test_coincident_nodes_search_every_key_with_a_neighbour():
     """The keys left out of coincident_nodes' neighbour search have no other key within the bound: checked
     against every pair, for clusters of keys just inside and just outside the bound, far from the origin
     too (rounding grows with the coordinates)."""
-    from core.skeleton.graph import _maybe_near
+    from core.skeleton.graph import _PROJECTION, _maybe_near
 
     rng = np.random.default_rng(3)
     bound = 1e-8
@@ -782,7 +836,7 @@ def test_coincident_nodes_search_every_key_with_a_neighbour():
         distance = np.linalg.norm(keys[:, None] - keys[None], axis=2)
         np.fill_diagonal(distance, np.inf)
         has_neighbour = np.flatnonzero((distance < bound).any(axis=1))
-        suspects = _maybe_near(keys, bound)
+        suspects = _maybe_near(keys @ _PROJECTION, float(np.abs(keys).max()), bound)
         assert len(has_neighbour) > 100
         assert np.isin(has_neighbour, suspects).all()
         assert len(suspects) < len(keys)
