@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
 from ..unionfind import find_root
 from .validation import END_PLANAR
@@ -49,12 +48,9 @@ class Arcs:
         return (self.node < 0).any(axis=1)
 
 
-def coincident_nodes(
-    start: np.ndarray, direction: np.ndarray, scale: float, tol: float, workers: int = 1
-) -> np.ndarray:
+def coincident_nodes(start: np.ndarray, direction: np.ndarray, scale: float, tol: float) -> np.ndarray:
     """(N,) int32: for each node line (start (N, 3), unit direction (N, 3)), the lowest id of the nodes on the
-    same line (within tol, lengths; scale: the scene's diagonal). workers: threads searching neighbours at
-    once; the result does not depend on it.
+    same line (within tol, lengths; scale: the scene's diagonal).
 
     In degenerate scenes one extremal line goes through more generators than its kind needs (a vertex, a
     parallel edge and a floor edge aligned): every subset of them validates as a node of its own. The simplest
@@ -64,53 +60,26 @@ def coincident_nodes(
     if n == 0:
         return np.empty(0, dtype=np.int32)
     radius = tol / scale
-    # a line's foot moves by |foot| times the direction error: both scaled to lengths of the scene. Each line
-    # is entered with its largest direction component positive; two directions within the radius have the
-    # same largest component unless the two largest of either tie within twice the radius (a diagonal): those
-    # lines are entered with both orientations (keys n.. stand for the tied lines). Only the keys that may
-    # have another within the radius (about half) go into the tree; the others are lines of one node, found
-    # from the keys' projections alone: all keys at once would set the peak memory of a build
+    # a line's key is its foot (scaled to lengths of the scene: the foot moves by |foot| times the direction
+    # error) and its direction, entered with its largest component positive; two directions within the radius
+    # have the same largest component unless the two largest of either tie within twice the radius (a
+    # diagonal): those lines are entered with both orientations (keys n.. stand for the tied lines). Keys
+    # within the radius project within |_PROJECTION| radius of each other (plus rounding): only keys that
+    # close in projection order are compared, each made again from its line when needed. Neither the keys
+    # nor a search tree are held: they would set the peak memory of a build
     tied = np.flatnonzero(_tied_lines(direction, 2.0 * radius))
-    bound = np.nextafter(radius, np.inf)
     projection, largest = _key_projections(start, direction, scale, tied, _PROJECTION)
-    suspects = _maybe_near(projection, largest, bound)
-    del projection
-    keys = _line_keys(start, direction, scale, tied, suspects)
-    # sliding midpoint splits: built faster than median ones, and searched as fast for these keys
-    tree = cKDTree(keys, balanced_tree=False)
-    key_of_row = np.append(suspects, n + len(tied))
+    order = np.argsort(projection)
+    width = np.linalg.norm(_PROJECTION) * radius * (1.0 + 1e-6) + 64.0 * np.finfo(float).eps * (
+        np.abs(_PROJECTION).sum() * largest
+    )
     parent = np.arange(n, dtype=np.int32)
-    # the neighbours within the radius of a block of keys at a time, the nearest k first, then more for the
-    # keys with k of them, in smaller blocks: a line through many generators has many duplicates, and all pairs
-    # of all of them at once (cKDTree.query_pairs, query_ball_point's lists) set the peak memory of a build
-    rows = np.arange(len(suspects))
-    k = 8
-    while len(rows):
-        more = []
-        for lo in range(0, len(rows), max(1, _MERGE_NEIGHBOURS // k)):
-            block = rows[lo : lo + max(1, _MERGE_NEIGHBOURS // k)]
-            distance, found = tree.query(keys[block], k=k, distance_upper_bound=bound, workers=workers)
-            _merge(parent, suspects[block], key_of_row[found], tied)
-            more.append(block[np.isfinite(distance[:, -1])])
-        rows = np.concatenate(more)
-        k *= 4
+    _merge_in_order(parent, start, direction, scale, tied, projection, order, width, radius)
     return _lowest_of_sets(parent)
 
 
 #: a projection of the keys mixing all six coordinates, so that distinct lines rarely project close together
 _PROJECTION = 1.0 / np.sqrt(np.array([2.0, 3.0, 5.0, 7.0, 11.0, 13.0]))
-
-
-def _maybe_near(projection: np.ndarray, largest: float, bound: float) -> np.ndarray:
-    """Sorted (S,) int64: the keys that may have another key closer than bound, from their projections (K,)
-    float64 (keys . _PROJECTION) and the largest magnitude of any key coordinate. Keys that close project
-    within |_PROJECTION| bound of each other (plus rounding), so the others have no neighbour in projection
-    order within that much: they are left out."""
-    order = np.argsort(projection)
-    width = np.linalg.norm(_PROJECTION) * bound * (1.0 + 1e-6) + 64.0 * np.finfo(float).eps * (
-        np.abs(_PROJECTION).sum() * largest
-    )
-    return np.flatnonzero(_close_in_order(projection, order, width))
 
 
 @njit(cache=True)
@@ -161,49 +130,38 @@ def _key_projections(start, direction, scale, tied, projection_axis):
 
 
 @njit(cache=True)
-def _line_keys(start, direction, scale, tied, rows):
-    """(R, 6) float64 the keys of rows (R,) int64 (rows N.. the tied lines (T,) int64 in their other
-    orientation)."""
+def _merge_in_order(parent, start, direction, scale, tied, projection, order, width, radius):
+    """Union, in the forest parent (N,) int32 whose roots are their sets' lowest ids, of the lines whose keys
+    (see coincident_nodes; rows N.. the tied lines (T,) int64 in their other orientation) lie within radius:
+    each key is compared with those after it in projection order (order (N + T,) of projection (N + T,))
+    while the projections stay within width."""
     n = start.shape[0]
-    keys = np.empty((rows.shape[0], 6))
-    for i in range(rows.shape[0]):
-        row = rows[i]
-        _write_key(start, direction, scale, row if row < n else tied[row - n], row >= n, keys[i])
-    return keys
-
-
-@njit(cache=True)
-def _close_in_order(values, order, width):
-    """(K,) bool: the values (K,) with a neighbour in sorted order (order (K,)) within width of them."""
-    close = np.zeros(values.shape[0], dtype=np.bool_)
-    for i in range(order.shape[0] - 1):
-        if values[order[i + 1]] - values[order[i]] <= width:
-            close[order[i]] = True
-            close[order[i + 1]] = True
-    return close
-
-
-#: neighbours (keys times k) one cKDTree.query looks for
-_MERGE_NEIGHBOURS = 1 << 18
-
-
-@njit(cache=True)
-def _merge(parent, ids, found, tied):
-    """Union of the sets of keys ids[b] and found[b, j] (B, K) int64 (N + T: none) in the forest parent (N,)
-    int32, whose roots are their sets' lowest ids; keys from N on stand for the lines tied (T,) entered twice."""
-    n = len(parent)
-    for row in range(found.shape[0]):
-        a = find_root(parent, ids[row] if ids[row] < n else tied[ids[row] - n])
-        for j in range(found.shape[1]):
-            key = found[row, j]
-            if key >= n + len(tied):
+    key = np.empty(6)
+    other = np.empty(6)
+    for a in range(order.shape[0]):
+        row = order[a]
+        line = row if row < n else tied[row - n]
+        written = False
+        for b in range(a + 1, order.shape[0]):
+            next_row = order[b]
+            if projection[next_row] - projection[row] > width:
                 break
-            b = find_root(parent, key if key < n else tied[key - n])
-            if a < b:
-                parent[b] = a
-            elif b < a:
-                parent[a] = b
-                a = b
+            next_line = next_row if next_row < n else tied[next_row - n]
+            if find_root(parent, line) == find_root(parent, next_line):
+                continue
+            if not written:
+                _write_key(start, direction, scale, line, row >= n, key)
+                written = True
+            _write_key(start, direction, scale, next_line, next_row >= n, other)
+            squared = 0.0
+            for k in range(6):
+                squared += (key[k] - other[k]) ** 2
+            if np.sqrt(squared) <= radius:
+                low = find_root(parent, line)
+                high = find_root(parent, next_line)
+                if high < low:
+                    low, high = high, low
+                parent[high] = low
 
 
 @njit(cache=True)

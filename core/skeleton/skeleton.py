@@ -196,7 +196,7 @@ class Skeleton:
         self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
         nodes = _concatenated(NodeChunk, self._node_parts)
         _return_free_memory()
-        node_line = coincident_nodes(nodes.start, nodes.direction, scene.diagonal, scene.tol.length, WORKERS)
+        node_line = coincident_nodes(nodes.start, nodes.direction, scene.diagonal, scene.tol.length)
         edge_tol = _edge_tolerance(scene)
         if self.sources is None:
             # no later build merges nodes or pairs incidences: the duplicates go before the arcs are assembled,

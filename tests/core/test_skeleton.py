@@ -820,26 +820,57 @@ def test_incidences_sort_as_lexsort_does():
         np.testing.assert_array_equal(order, expected)
 
 
-def test_coincident_nodes_search_every_key_with_a_neighbour():
-    """The keys left out of coincident_nodes' neighbour search have no other key within the bound: checked
-    against every pair, for clusters of keys just inside and just outside the bound, far from the origin
-    too (rounding grows with the coordinates)."""
-    from core.skeleton.graph import _PROJECTION, _maybe_near
+def _naive_coincident_nodes(start, direction, scale, tol) -> np.ndarray:
+    """coincident_nodes by comparing every pair of lines: feet over scale and directions, either orientation,
+    within tol / scale in six dimensions; the lowest id of each connected set."""
+    foot = (start - np.einsum("ij,ij->i", start, direction)[:, None] * direction) / scale
+    parent = list(range(len(start)))
+
+    def root(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i in range(len(start)):
+        for j in range(i + 1, len(start)):
+            near = min(
+                np.linalg.norm(np.concatenate([foot[i] - foot[j], direction[i] - sign * direction[j]]))
+                for sign in (1.0, -1.0)
+            )
+            if near <= tol / scale:
+                a, b = root(i), root(j)
+                parent[max(a, b)] = min(a, b)
+    return np.array([root(i) for i in range(len(start))])
+
+
+def test_coincident_nodes_merge_as_comparing_every_pair_does():
+    """Clusters of lines just inside and just outside the tolerance of each other, given by other points and
+    either orientation, diagonal directions among them (two largest components tied), near the origin and far
+    from it (rounding grows with the coordinates): merged as comparing every pair of lines merges them."""
+    from core.skeleton.graph import coincident_nodes
 
     rng = np.random.default_rng(3)
-    bound = 1e-8
+    scale, tol = 10.0, 1e-7
     for offset in (0.0, 1e3):
-        centres = rng.uniform(-1.0, 1.0, size=(300, 6)) + offset
-        steps = rng.normal(size=(300, 6))
-        steps *= (bound * rng.choice([0.5, 0.999, 1.001, 2.0], size=300) / np.linalg.norm(steps, axis=1))[:, None]
-        keys = np.vstack([centres, centres[:150] + steps[:150], rng.uniform(-1.0, 1.0, size=(200, 6)) + offset])
-        distance = np.linalg.norm(keys[:, None] - keys[None], axis=2)
-        np.fill_diagonal(distance, np.inf)
-        has_neighbour = np.flatnonzero((distance < bound).any(axis=1))
-        suspects = _maybe_near(keys @ _PROJECTION, float(np.abs(keys).max()), bound)
-        assert len(has_neighbour) > 100
-        assert np.isin(has_neighbour, suspects).all()
-        assert len(suspects) < len(keys)
+        direction = rng.normal(size=(120, 3))
+        direction[:40, 1] = direction[:40, 0] * rng.choice([1.0, -1.0], size=40)
+        direction /= np.linalg.norm(direction, axis=1)[:, None]
+        start = rng.uniform(-5.0, 5.0, size=(120, 3)) + offset
+        copies = rng.integers(0, 120, size=200)
+        across = rng.normal(size=(200, 6))
+        across *= (tol / scale * rng.choice([0.3, 0.999, 1.001, 3.0], size=200) / np.linalg.norm(across, axis=1))[
+            :, None
+        ]
+        # far from the origin a turn moves the foot by that distance times the angle: turns made as small
+        copy_direction = direction[copies] + across[:, 3:] / (1.0 + offset)
+        copy_direction /= np.linalg.norm(copy_direction, axis=1)[:, None]
+        copy_start = start[copies] + scale * across[:, :3] + rng.uniform(-3.0, 3.0, size=(200, 1)) * direction[copies]
+        copy_direction *= rng.choice([1.0, -1.0], size=(200, 1))
+        starts, directions = np.vstack([start, copy_start]), np.vstack([direction, copy_direction])
+        expected = _naive_coincident_nodes(starts, directions, scale, tol)
+        merged = len(expected) - len(np.unique(expected))
+        assert 50 < merged < 200
+        np.testing.assert_array_equal(coincident_nodes(starts, directions, scale, tol), expected)
 
 
 # ----------------------------------------------------------------------------------------------------------
