@@ -489,30 +489,20 @@ class Skeleton:
         )  # fmt: skip
         _return_free_memory()
         offsets = _probed_pieces(arcs.kind, arcs.node, arcs.ends, cut_offsets)
+        piece_s, piece_node = _piece_bounds(offsets, cut_offsets, cut_s, cut_node, arcs.s, arcs.node)
+        del cut_offsets, cut_s, cut_node
         arc = _arc_of_pieces(offsets)
-        last = offsets[arc + 1] - offsets[arc] - 1
-        # each piece runs from the arc's start or a cut to the next cut or the arc's end
-        within = np.arange(offsets[-1]) - offsets[arc]
-        bound_s = np.concatenate([cut_s, [np.nan]])
-        bound_node = np.concatenate([cut_node, [-1]])
-        before = np.where(within > 0, cut_offsets[arc] + within - 1, len(cut_s))
-        after = np.where(within < last, cut_offsets[arc] + within, len(cut_s))
-        start_s = np.where(within > 0, bound_s[before], arcs.s[arc, 0])
-        start_node = np.where(within > 0, bound_node[before], arcs.node[arc, 0])
-        end_s = np.where(within < last, bound_s[after], arcs.s[arc, 1])
-        end_node = np.where(within < last, bound_node[after], arcs.node[arc, 1])
         vertex = arcs.codes[arc, 0].astype(np.int64)
+        edge = (arcs.codes[arc, 1] - nv).astype(np.int64)
+        del arc
         apex = scene.vertices[vertex]
-        a = scene.vertices[scene.edges[arcs.codes[arc, 1] - nv, 0]]
-        b = scene.vertices[scene.edges[arcs.codes[arc, 1] - nv, 1]]
-        point = a + 0.5 * (start_s + end_s)[:, None] * (b - a)
-        swath = np.cross(b - a, apex - a)
-        shift = _PROBE_LENGTHS * scene.tol.length * swath / np.linalg.norm(swath, axis=1)[:, None]
-        seen = np.full((len(arc), 2), -1, dtype=np.int32)
+        seen = np.full((len(vertex), 2), -1, dtype=np.int32)
         for column, side in enumerate((1.0, -1.0)):
-            if len(arc) == 0:
+            if len(vertex) == 0:
                 break
-            directions = point + side * shift - apex
+            directions = _probe_directions(
+                vertex, edge, piece_s, scene.vertices, scene.edges, side * _PROBE_LENGTHS * scene.tol.length
+            )
             free = _lines_leave_freely(
                 vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
                 topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
@@ -520,12 +510,10 @@ class Skeleton:
                 scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
             )  # fmt: skip
             polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
+            del directions
             hit = free & (polygon >= 0)
             seen[hit, column] = topo.face_group[polygon[hit]]
-        return Probes(
-            offsets, np.stack([start_s, end_s], axis=1), np.stack([start_node, end_node], axis=1).astype(np.int32),
-            seen,
-        )
+        return Probes(offsets, piece_s, piece_node, seen)
 
     def _faces_along(self, edge: int, s: float) -> list[tuple[int, int]]:
         """(face, its edge) pairs around the point at parameter s of `edge`: the edge's own faces, and those of
@@ -717,6 +705,52 @@ def _probed_pieces(kind, node, ends, cut_offsets):
         wanted = kind[arc] == ARC_EV and node[arc, 0] >= 0 and node[arc, 1] >= 0 and probed
         offsets[arc + 1] = offsets[arc] + (cuts + 1 if wanted else 0)
     return offsets
+
+
+@njit(cache=True)
+def _piece_bounds(offsets, cut_offsets, cut_s, cut_node, arc_s, arc_node):
+    """(K, 2) float64 and (K, 2) int32: where each probed piece (offsets (A+1,) int32, see _probed_pieces)
+    starts and ends on its arc's edge, and the nodes there: the arc's start or a cut, then the next cut or
+    the arc's end (cuts: cut_offsets (A+1,) into cut_s, cut_node, see _arc_cuts; the arcs' s, node (A, 2))."""
+    piece_s = np.empty((offsets[-1], 2))
+    piece_node = np.empty((offsets[-1], 2), dtype=np.int32)
+    for arc in range(offsets.shape[0] - 1):
+        pieces = offsets[arc + 1] - offsets[arc]
+        for within in range(pieces):
+            piece = offsets[arc] + within
+            cut = cut_offsets[arc] + within
+            if within > 0:
+                piece_s[piece, 0] = cut_s[cut - 1]
+                piece_node[piece, 0] = cut_node[cut - 1]
+            else:
+                piece_s[piece, 0] = arc_s[arc, 0]
+                piece_node[piece, 0] = arc_node[arc, 0]
+            if within < pieces - 1:
+                piece_s[piece, 1] = cut_s[cut]
+                piece_node[piece, 1] = cut_node[cut]
+            else:
+                piece_s[piece, 1] = arc_s[arc, 1]
+                piece_node[piece, 1] = arc_node[arc, 1]
+    return piece_s, piece_node
+
+
+@njit(cache=True)
+def _probe_directions(vertex, edge, piece_s, vertices, edges, shift):
+    """(K, 3) float64: from each piece's vertex (K,) int64 to the middle of its piece of edge (K,) int64
+    (piece_s (K, 2)), moved off the swath by `shift` (a length, signed: + the side cross(b - a, apex - a))."""
+    directions = np.empty((vertex.shape[0], 3))
+    for k in range(vertex.shape[0]):
+        middle = 0.5 * (piece_s[k, 0] + piece_s[k, 1])
+        a = vertices[edges[edge[k], 0]]
+        b = vertices[edges[edge[k], 1]]
+        apex = vertices[vertex[k]]
+        along = b - a
+        to_apex = apex - a
+        swath = np.cross(along, to_apex)
+        scale = shift / np.sqrt(swath[0] ** 2 + swath[1] ** 2 + swath[2] ** 2)
+        for j in range(3):
+            directions[k, j] = a[j] + middle * along[j] + scale * swath[j] - apex[j]
+    return directions
 
 
 @njit(cache=True)
