@@ -29,6 +29,11 @@ import numpy as np
 #: a generic scene
 STEP = 1e-7
 
+#: how far (relative to the diagonal) beyond its outer generators a line is looked at to tell whether it goes
+#: on there or stops: well below the step, within which a moved line passing a vertex's crease edge enters
+#: the object (its third face is a step away), and well above MARGIN
+BEYOND = 1e-2 * STEP
+
 #: a point closer than this (relative to the diagonal) to a polygon's side is on its outline
 MARGIN = 1e-10
 
@@ -37,8 +42,10 @@ MARGIN = 1e-10
 #: the generator a move leaves is not met any more
 MEETS = 1e-9
 
-#: directions of the rays telling air from solid; the next is used when the first meets a face near its side
-_PROBES = np.array([[0.5377, 0.3129, 0.7832], [-0.2471, 0.8813, -0.4027], [0.6711, -0.7013, -0.2406]])
+#: unit directions of the rays telling air from solid (see SceneGeometry.in_air)
+_PROBES = np.array([[0.5377, 0.3129, 0.7832], [-0.2471, 0.8813, -0.4027], [0.6711, -0.7013, -0.2406],
+                    [-0.8129, -0.1712, 0.5567], [0.1049, -0.4435, -0.8901]])  # fmt: skip
+_PROBES /= np.linalg.norm(_PROBES, axis=1)[:, None]
 
 
 @dataclass(frozen=True)
@@ -48,12 +55,14 @@ class Relaxation:
     vertex): +1 towards larger coordinates, -1 towards smaller. dropped: the relaxed generator (its code) and,
     for a vertex loosened to an edge, that edge's code (else -1). pencil: two of its edges are parallel, so its
     lines lie in their plane and turn about the point where the third edge crosses it (a planar pencil, not a
-    regulus; see has_parallel_edges)."""
+    regulus; see has_parallel_edges). terminal: the moved line stops at one of its outer generators (enters
+    the object there) instead of going on past it, as every line of the paper's figures does."""
 
     generators: tuple[int, ...]
     direction: int
     dropped: tuple[int, int]
     pencil: bool
+    terminal: bool
 
 
 class SceneGeometry:
@@ -144,17 +153,17 @@ class SceneGeometry:
 
     def in_air(self, point: np.ndarray) -> bool:
         """Whether the point is in the air of the scene: the first closed face a ray from it meets is seen from
-        its front. A probe meeting a face near its outline is replaced by the next."""
+        its front. Of several rays, the one whose first face is met deepest inside its outline decides."""
+        deepest, verdict = -np.inf, False
         for probe in _PROBES:
-            probe = probe / np.linalg.norm(probe)
             tau, polygon, depth = self.crossings(point, probe)
             ahead = (tau > 0.0) & self.closed[polygon]
             if not ahead.any():
                 return False
             first = np.flatnonzero(ahead)[np.argmin(tau[ahead])]
-            if depth[first] > self.margin:
-                return bool(self.normals[polygon[first]] @ probe < 0.0)
-        raise AssertionError(f"every probe from {point} meets a face at its outline")
+            if depth[first] > deepest:
+                deepest, verdict = depth[first], bool(self.normals[polygon[first]] @ probe < 0.0)
+        return verdict
 
     def free_between(self, origin: np.ndarray, direction: np.ndarray, taus: np.ndarray) -> bool:
         """Whether the line origin + tau direction is free from the first to the last of taus (its generators'
@@ -231,6 +240,15 @@ def is_critical(geometry: SceneGeometry, origin, direction, generators) -> bool:
     return geometry.free_between(origin, direction, np.array(taus))
 
 
+def goes_on_past_its_ends(geometry: SceneGeometry, origin, direction, generators) -> bool:
+    """Whether the line (origin (3,), unit direction (3,)) is in air just beyond its first and its last
+    generator (codes): tangent there rather than stopping."""
+    taus = np.array([geometry.contact(code, origin, direction)[0] for code in generators])
+    beyond = BEYOND * geometry.diagonal
+    before, after = origin + (taus.min() - beyond) * direction, origin + (taus.max() + beyond) * direction
+    return geometry.in_air(before) and geometry.in_air(after)
+
+
 def node_relaxations(geometry: SceneGeometry, generators, origin, direction) -> list[Relaxation]:
     """The arcs a node must have: generators, the node's generator codes; origin (3,), direction (3,) its line.
     For each relaxed constraint and each way along the family, the line a step away is tested by is_critical."""
@@ -245,5 +263,7 @@ def node_relaxations(geometry: SceneGeometry, generators, origin, direction) -> 
         for way in (1, -1):
             moved = family_line(geometry, kept, s_node + way * step)
             if is_critical(geometry, *moved, kept):
-                found.append(Relaxation(tuple(sorted(kept)), way, dropped, geometry.has_parallel_edges(kept)))
+                pencil = geometry.has_parallel_edges(kept)
+                terminal = not goes_on_past_its_ends(geometry, *moved, kept)
+                found.append(Relaxation(tuple(sorted(kept)), way, dropped, pencil, terminal))
     return found
