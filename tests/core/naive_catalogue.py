@@ -47,6 +47,9 @@ _PROBES = np.array([[0.5377, 0.3129, 0.7832], [-0.2471, 0.8813, -0.4027], [0.671
                     [-0.8129, -0.1712, 0.5567], [0.1049, -0.4435, -0.8901]])  # fmt: skip
 _PROBES /= np.linalg.norm(_PROBES, axis=1)[:, None]
 
+#: a ray meeting its first face this far (relative to the diagonal) inside the outline is beyond rounding
+_CLEAR = 1e-6
+
 
 @dataclass(frozen=True)
 class Relaxation:
@@ -128,10 +131,12 @@ class SceneGeometry:
             return tau, np.nan, float(np.linalg.norm(origin + tau * direction - point))
         a, b = self.edge_ends(code)
         along = b - a
-        # closest points of two lines: the 2 x 2 normal equations
-        system = np.array([[direction @ direction, -(direction @ along)], [direction @ along, -(along @ along)]])
-        rhs = np.array([(a - origin) @ direction, (a - origin) @ along])
-        tau, s = np.linalg.solve(system, rhs)
+        # closest points of two lines: the 2 x 2 normal equations, by Cramer's rule
+        uu, ua, aa = direction @ direction, direction @ along, along @ along
+        ru, ra = (a - origin) @ direction, (a - origin) @ along
+        determinant = ua * ua - uu * aa
+        tau = (ua * ra - aa * ru) / determinant
+        s = (uu * ra - ua * ru) / determinant
         gap = float(np.linalg.norm(origin + tau * direction - (a + s * along)))
         return float(tau), float(s), gap
 
@@ -153,7 +158,8 @@ class SceneGeometry:
 
     def in_air(self, point: np.ndarray) -> bool:
         """Whether the point is in the air of the scene: the first closed face a ray from it meets is seen from
-        its front. Of several rays, the one whose first face is met deepest inside its outline decides."""
+        its front. A ray meeting its first face well inside the outline decides; else, of several rays, the one
+        meeting it deepest inside."""
         deepest, verdict = -np.inf, False
         for probe in _PROBES:
             tau, polygon, depth = self.crossings(point, probe)
@@ -163,6 +169,8 @@ class SceneGeometry:
             first = np.flatnonzero(ahead)[np.argmin(tau[ahead])]
             if depth[first] > deepest:
                 deepest, verdict = depth[first], bool(self.normals[polygon[first]] @ probe < 0.0)
+            if deepest > _CLEAR * self.diagonal:
+                break
         return verdict
 
     def free_between(self, origin: np.ndarray, direction: np.ndarray, taus: np.ndarray) -> bool:
