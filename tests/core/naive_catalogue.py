@@ -99,6 +99,10 @@ class SceneGeometry:
         open_objects = {int(object_ids[p]) for p, ids in enumerate(polygon_edges) if (faces_per_edge[ids] != 2).any()}
         self.closed = np.array([int(o) not in open_objects for o in object_ids])
         self.edges_at = [np.flatnonzero((self.edges == v).any(axis=1)) for v in range(self.n_vertices)]
+        self.elements = [
+            {int(v) for v in scene.polygon_vertices(p)} | {self.n_vertices + int(e) for e in edge_ids}
+            for p, edge_ids in enumerate(polygon_edges)
+        ]
 
     # ---- elements -------------------------------------------------------------------------------------------
 
@@ -173,12 +177,15 @@ class SceneGeometry:
                 break
         return verdict
 
-    def free_between(self, origin: np.ndarray, direction: np.ndarray, taus: np.ndarray) -> bool:
-        """Whether the line origin + tau direction is free from the first to the last of taus (its generators'
-        positions): no panel crossed inside, and air between any two consecutive contacts with the scene."""
+    def free_between(self, origin: np.ndarray, direction: np.ndarray, generators, taus: np.ndarray) -> bool:
+        """Whether the line origin + tau direction is free from the first to the last of its generators (codes)
+        met at taus: no panel crossed inside, and air between any two consecutive contacts with the scene."""
         lo, hi = float(np.min(taus)), float(np.max(taus))
         tau, polygon, depth = self.crossings(origin, direction)
-        inside = (tau > lo) & (tau < hi)
+        # a line through a generator meets the planes of the faces around it there; computed, that point
+        # strays from the generator as the line nears the plane, and would pass for a crossing of the face
+        around = np.array([not self.elements[p].isdisjoint(generators) for p in polygon], dtype=bool)
+        inside = (tau > lo) & (tau < hi) & ~around
         if (inside & ~self.closed[polygon] & (depth > self.margin)).any():
             return False
         # a line through a corner or an edge meets several faces there, at positions equal up to rounding
@@ -245,7 +252,7 @@ def is_critical(geometry: SceneGeometry, origin, direction, generators) -> bool:
         if not geometry.is_vertex(code) and not 0.0 < s < 1.0:
             return False
         taus.append(tau)
-    return geometry.free_between(origin, direction, np.array(taus))
+    return geometry.free_between(origin, direction, generators, np.array(taus))
 
 
 def goes_on_past_its_ends(geometry: SceneGeometry, origin, direction, generators) -> bool:
