@@ -9,13 +9,19 @@ parameter edge; each incident arc must be a kept move. Terminal lines (stopping 
 generators on the room's walls or the light panel need no special case: the geometry decides.
 
 Restrictions, named: only the generic rooms (floating turned boxes, no contacts) are checked, and in them
-only the VV, VEE, EVE and E4 nodes whose line does not lie in a face's plane. Left out:
+the VV, VEE, EVE and E4 nodes. Left out:
 
-* face nodes (FEE, EFE, FXE) and the VV / VEE / EVE / E4 nodes whose line lies in a face's plane (two corners
-  of one face; a corner of a face and the edge across it): these are the paper's face nodes (Fvv, FvE, FEE,
-  EFE, appendix 7.1) whatever their label. Their line slides over the face, where the oracle's air test
-  meets the face at its outline, and their arcs include the face's pencils, which the skeleton does not store
-  (core.skeleton.validation.NODE_NAMES). `test_restriction_leaves_most_nodes_checked` bounds their number.
+* face nodes (FEE, EFE, FXE): their generators include a face's crossed edges, whose relaxations the oracle
+  does not derive;
+* nodes whose line holds a whole edge (two corners joined by an edge): every family through them runs along
+  the edge's faces;
+* at nodes whose line lies in a face's plane (two corners of one face; a corner of a face and the edge
+  across it: the paper's Fvv and FvE nodes, appendix 7.1, whatever their label), the families that keep to
+  that plane (the face's pencils, stored by the skeleton as EV arcs or not at all): their lines slide over
+  the face, where the oracle's air test cannot judge them. The arcs leaving the plane are checked, and the
+  skeleton's arcs with the generators of an unjudged family are set aside.
+
+`test_restriction_leaves_most_nodes_checked` bounds the nodes left out.
 
 Two departures of the skeleton from the catalogue are kept as strict xfails, so that they are seen and turn
 into failures the day they are resolved:
@@ -56,14 +62,18 @@ PAPER_COUNTS = {NODE_VV: 4, NODE_VEE: 5, NODE_EVE: 6, NODE_E4: 6}
 
 @dataclass(frozen=True)
 class NodeCheck:
-    """One checked node: its id and kind, its generators (codes, line order); the arcs the oracle expects and
-    those the skeleton has, {(sorted generator codes, way): count}, apart for the pencils (two parallel edges
-    among the generators); whether its line is a critical line by the oracle, and goes on past both ends; the
-    number of expected arcs (pencils included) whose lines go on past both their ends."""
+    """One checked node: its id and kind, its generators (codes, line order); whether its line lies in a face's
+    plane, and how many of its moves keep to such a plane (not judged, see Relaxation.in_face_plane); the arcs
+    the oracle expects and those the skeleton has, {(sorted generator codes, way): count}, both without the
+    unjudged families and apart for the pencils (two parallel edges among the generators); whether its line is
+    a critical line by the oracle (not judged in a face's plane: true), and goes on past both ends (false in a
+    face's plane); the number of expected arcs (pencils included) whose lines go on past both their ends."""
 
     node: int
     kind: int
     generators: tuple[int, ...]
+    planar: bool
+    unjudged: int
     expected: Counter
     found: Counter
     expected_pencils: Counter
@@ -125,22 +135,35 @@ def _catalogue(name: str) -> Catalogue:
         if kind not in CHECKED_KINDS:
             left_out[NODE_NAMES[kind], "face node"] += 1
             continue
-        if geometry.lies_in_a_face_plane(origin, direction):
-            left_out[NODE_NAMES[kind], "line in a face's plane"] += 1
+        if geometry.lies_along_an_edge(origin, direction):
+            left_out[NODE_NAMES[kind], "line along an edge"] += 1
             continue
+        planar = geometry.lies_in_a_face_plane(origin, direction)
         relaxations = node_relaxations(geometry, generators, origin, direction)
-        expected = Counter((r.generators, r.direction) for r in relaxations if not r.pencil)
-        expected_pencils = Counter((r.generators, r.direction) for r in relaxations if r.pencil)
-        found, found_pencils = _split_pencils(geometry, incident_arcs(arcs.codes, arcs.node, node))
+        judged = [r for r in relaxations if not r.in_face_plane]
+        expected = Counter((r.generators, r.direction) for r in judged if not r.pencil)
+        expected_pencils = Counter((r.generators, r.direction) for r in judged if r.pencil)
+        in_plane = {r.generators for r in relaxations if r.in_face_plane}
+        found = incident_arcs(arcs.codes, arcs.node, node)
+        found = Counter({key: count for key, count in found.items() if key[0] not in in_plane})
+        found, found_pencils = _split_pencils(geometry, found)
         checks.append(
             NodeCheck(
-                node, kind, generators, expected, found, expected_pencils, found_pencils,
-                is_critical(geometry, origin, direction, generators),
-                goes_on_past_its_ends(geometry, origin, direction, generators),
-                sum(not r.terminal for r in relaxations),
+                node, kind, generators, planar, len(relaxations) - len(judged), expected, found, expected_pencils,
+                found_pencils, planar or is_critical(geometry, origin, direction, generators),
+                not planar and goes_on_past_its_ends(geometry, origin, direction, generators),
+                sum(not r.terminal for r in judged),
             )
         )  # fmt: skip
     return Catalogue(checks, left_out)
+
+
+@pytest.mark.parametrize("name", ROOMS)
+def test_every_move_is_judged_off_face_planes(name):
+    """The oracle sets moves aside only at nodes whose line lies in a face's plane."""
+    checks = _catalogue(name).checks
+    assert [c.node for c in checks if c.unjudged and not c.planar] == []
+    assert any(c.planar for c in checks)
 
 
 @pytest.mark.parametrize("name", ROOMS)
@@ -160,7 +183,8 @@ def test_every_node_has_its_catalogue_arcs(name):
 )
 @pytest.mark.parametrize("name", ROOMS)
 def test_every_node_is_a_critical_line(name):
-    """Every checked node's line meets its generators and is free between the first and the last."""
+    """Every checked node's line meets its generators and is free between the first and the last (lines in a
+    face's plane are not judged)."""
     wrong = [f"node {c.node} {NODE_NAMES[c.kind]} {c.generators}" for c in _catalogue(name).checks if not c.critical]
     assert wrong == [], f"{len(wrong)} nodes:\n" + "\n".join(wrong)
 
@@ -186,7 +210,7 @@ def test_parallel_edge_pencils_are_arcs(name):
 def test_oracle_counts_are_the_papers(name):
     """The oracle, on its own, gives the paper's arc counts where the paper's figures apply (see PAPER_COUNTS):
     this checks the oracle against the catalogue, not against the skeleton."""
-    checks = [c for c in _catalogue(name).checks if c.critical]
+    checks = [c for c in _catalogue(name).checks if c.critical and not c.planar]
     tangent = [c for c in checks if c.tangent_ends]
     edge_ended = [c for c in checks if c.kind in (NODE_EVE, NODE_E4)]
     wrong = [
@@ -205,10 +229,10 @@ def test_oracle_counts_are_the_papers(name):
 
 @pytest.mark.parametrize("name", ROOMS)
 def test_restriction_leaves_most_nodes_checked(name):
-    """The nodes left out (face nodes, lines in a face's plane) are under a third of the skeleton."""
+    """The nodes left out (face nodes, lines holding an edge) are under a tenth of the skeleton."""
     catalogue = _catalogue(name)
     left_out = sum(catalogue.left_out.values())
-    assert 3 * left_out < left_out + len(catalogue.checks), dict(catalogue.left_out)
+    assert 10 * left_out < left_out + len(catalogue.checks), dict(catalogue.left_out)
 
 
 def test_comparison_sees_a_missing_and_a_reversed_arc():
