@@ -298,7 +298,9 @@ def goes_on_past_its_ends(geometry: SceneGeometry, origin, direction, generators
 
 def node_relaxations(geometry: SceneGeometry, generators, origin, direction) -> list[Relaxation]:
     """The arcs a node must have: generators, the node's generator codes; origin (3,), direction (3,) its line.
-    For each relaxed constraint and each way along the family, the line a step away is tested by is_critical."""
+    For each relaxed constraint and each way along the family, the line a step away is tested by is_critical;
+    the moves keeping to a face's plane are listed unjudged (Relaxation.in_face_plane). Raises AssertionError
+    when a family's line does not move continuously off the node (the oracle could not follow it)."""
     direction = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
     origin = np.asarray(origin, dtype=np.float64)
     found = []
