@@ -2227,77 +2227,71 @@ def _validate_chunk(
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
         # generators and that edge stop meeting the vertex: drop the vertex, keep the edge (the arcs of such
-        # over-determined lines, simplest configuration of seed 000 section 2.2)
+        # over-determined lines, simplest configuration of seed 000 section 2.2). Every such edge up to where
+        # the line stops: past one grazed (a table's near leg), the lines meeting the next (its far leg) end here
         for side in range(2):
             if ng > 3:
                 break
             g = first - 1 if side == 0 else last + 1
-            n_extra = 0
             while 0 <= g < n_groups:
                 n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
                                       g_lo[g], g_hi[g], tol, extras)  # fmt: skip
-                masked = False
+                # the edge lies on a face the line ends on (a box's edge against the wall)
+                on_face = False
+                if n_extra > 0:
+                    for i in range(g_lo[g], g_hi[g]):
+                        on_face = on_face or c_kind[i] == CONTACT_INTERIOR
                 for x in range(n_extra):
-                    masked = masked or edge_mask[extras[x]]
-                if masked:
-                    break
-                n_extra = 0
+                    extra = extras[x]
+                    if not edge_mask[extra]:
+                        continue
+                    # the rows bounded per candidate cover one edge; a seam of several needs more
+                    need = 4
+                    if ng == 2:
+                        need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
+                    while n_inc + need > incidences.node.shape[0]:
+                        incidences = _grown(incidences, n_inc)
+                    for j in range(ng):
+                        if gk[j] != GEN_VERTEX:
+                            continue
+                        n_retained = 0
+                        norm = -1
+                        for k in range(ng + 1):
+                            if k == j:
+                                continue
+                            r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
+                            r_id[n_retained] = gid[k] if k < ng else extra
+                            r_group[n_retained] = gg[k] if k < ng else g
+                            if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
+                                norm = n_retained
+                            n_retained += 1
+                        norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                        first_row = n_inc
+                        for sigma in (1.0, -1.0):
+                            n_inc = _relax(
+                                geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
+                                node,
+                            )  # fmt: skip
+                        # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
+                        # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
+                        # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
+                        # corner (a rug's, lines along the floor): the lines slide over that polygon either way
+                        if (on_face or flat[j]) and n_inc == first_row + 2 and \
+                                _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
+                            n_inc = first_row
+                    # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
+                    # well (the contact on either edge reaches its vertex at once)
+                    if ng == 2:
+                        n_inc = _swaths_leaving_both_vertices(
+                            geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                            gg, extra, g,
+                        )  # fmt: skip
                 if _group_blocked(
                     points, offsets, normals, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, angle_tol,
                     arc_start, arc_len, bounds,
                 ):  # fmt: skip
                     break
                 g = g - 1 if side == 0 else g + 1
-            # the edge lies on a face the line ends on (a box's edge against the wall)
-            on_face = False
-            if n_extra > 0:
-                for i in range(g_lo[g], g_hi[g]):
-                    on_face = on_face or c_kind[i] == CONTACT_INTERIOR
-            for x in range(n_extra):
-                extra = extras[x]
-                if not edge_mask[extra]:
-                    continue
-                # the rows bounded per candidate cover one edge; a seam of several needs more
-                need = 4
-                if ng == 2:
-                    need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
-                while n_inc + need > incidences.node.shape[0]:
-                    incidences = _grown(incidences, n_inc)
-                for j in range(ng):
-                    if gk[j] != GEN_VERTEX:
-                        continue
-                    n_retained = 0
-                    norm = -1
-                    for k in range(ng + 1):
-                        if k == j:
-                            continue
-                        r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
-                        r_id[n_retained] = gid[k] if k < ng else extra
-                        r_group[n_retained] = gg[k] if k < ng else g
-                        if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
-                            norm = n_retained
-                        n_retained += 1
-                    norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
-                    first_row = n_inc
-                    for sigma in (1.0, -1.0):
-                        n_inc = _relax(
-                            geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
-                            node,
-                        )  # fmt: skip
-                    # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
-                    # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
-                    # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
-                    # corner (a rug's, lines along the floor): the lines slide over that polygon either way
-                    if (on_face or flat[j]) and n_inc == first_row + 2 and \
-                            _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
-                        n_inc = first_row
-                # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
-                # well (the contact on either edge reaches its vertex at once)
-                if ng == 2:
-                    n_inc = _swaths_leaving_both_vertices(
-                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
-                        gg, extra, g,
-                    )  # fmt: skip
         # so do they where the edge is grazed between the two vertices (three generators on one line: a box's
         # corner, the top edge of a box and the corner of a box floating beyond, aligned)
         if ng == 2:
