@@ -1225,6 +1225,17 @@ def _edge_met_before(line, corner_edge, offsets, g, i, e):
     return False
 
 
+@njit_leaf
+def _vertex_met_before(line, corner_vertex, offsets, g, i, v):
+    """Whether one of the contacts of group g of the line before contact i is with vertex v (a vertex met by its
+    faces gives a contact per face)."""
+    for earlier in range(line.g_lo[g], i):
+        if line.c_kind[earlier] == CONTACT_VERTEX and \
+                corner_vertex[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == v:  # fmt: skip
+            return True
+    return False
+
+
 @njit(cache=True)
 def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
                    tau_w, gk, gid, ng):  # fmt: skip
@@ -1338,6 +1349,68 @@ def _swaths_leaving_both_vertices(geometry, line, retained, scratch, incidences,
 
 
 @njit_leaf
+def _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, v, g, out, pins):
+    """The masked edges the contact of a line through vertex v (met in group g of the line) may move into, written
+    to `out`: v's own, the contact moving into them from v (pins: v), and other objects' edges holding v (a
+    box's corner on the seam of two boxes side by side), the contact sliding either way (pins: -1). Returns how
+    many."""
+    count = 0
+    for slot in range(ve_off[v], ve_off[v + 1]):
+        if edge_mask[ve_edge[slot]]:
+            out[count] = ve_edge[slot]
+            pins[count] = v
+            count += 1
+    edges, offsets, corner_edge = geometry.edges, geometry.offsets, geometry.corner_edge
+    for i in range(line.g_lo[g], line.g_hi[g]):
+        if line.c_kind[i] != CONTACT_EDGE:
+            continue
+        e = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
+        if edge_mask[e] and edges[e, 0] != v and edges[e, 1] != v and \
+                not _edge_met_before(line, corner_edge, offsets, g, i, e):  # fmt: skip
+            out[count] = e
+            pins[count] = -1
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
+                                  ve_edge, gid, gg, x, g):  # fmt: skip
+    """The EEE arcs of a line through two vertex generators gid[0], gid[1] (groups gg) grazing a third vertex x
+    between them (group g): through an edge at each of the three corners (see _corner_edges), the contacts
+    leaving all three at once. Returns (incidences, grown when full, and the next free row)."""
+    corners = (gid[0], gid[1], x)
+    groups = (gg[0], gg[1], g)
+    size = 0
+    for k in range(3):
+        size = max(size, ve_off[corners[k] + 1] - ve_off[corners[k]] + line.g_hi[groups[k]] - line.g_lo[groups[k]])
+    found = np.empty((3, size), dtype=np.int64)
+    pins = np.empty((3, size), dtype=np.int64)
+    counts = np.empty(3, dtype=np.int64)
+    for k in range(3):
+        counts[k] = _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, corners[k], groups[k], found[k],
+                                  pins[k])  # fmt: skip
+    while n_inc + 2 * counts[0] * counts[1] * counts[2] > incidences.node.shape[0]:
+        incidences = _grown(incidences, n_inc)
+    r_kind, r_id, r_group, r_pin = retained
+    for a in range(counts[0]):
+        for b in range(counts[1]):
+            for c in range(counts[2]):
+                e_a, e_b, e_c = found[0, a], found[1, b], found[2, c]
+                if e_a == e_b or e_a == e_c or e_b == e_c:
+                    continue
+                r_kind[0], r_id[0], r_group[0], r_pin[0] = GEN_EDGE, e_a, groups[0], pins[0, a]
+                r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_b, groups[1], pins[1, b]
+                r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_c, groups[2], pins[2, c]
+                norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_a, -1)
+                for sigma in (1.0, -1.0):
+                    n_inc = _relax(geometry, line, retained, 3, 0, norm_dir, sigma, scratch, incidences, n_inc, node)
+    for k in range(3):
+        r_pin[k] = -1
+    return incidences, n_inc
+
+
+@njit_leaf
 def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j,
                              extra, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the node's generators (gk, gid, gg: ng of them) with vertex generator j replaced by another
@@ -1378,11 +1451,7 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
         if w == v:
             continue
         # once per vertex: each of its faces gives a contact
-        repeated = False
-        for earlier in range(line.g_lo[group_v], i):
-            repeated = repeated or (line.c_kind[earlier] == CONTACT_VERTEX and
-                                    corner_vertex[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == w)
-        if repeated:
+        if _vertex_met_before(line, corner_vertex, offsets, group_v, i, w):
             continue
         for slot_v in range(ve_off[v], ve_off[v + 1]):
             e_v = ve_edge[slot_v]
@@ -2160,77 +2229,71 @@ def _validate_chunk(
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
         # generators and that edge stop meeting the vertex: drop the vertex, keep the edge (the arcs of such
-        # over-determined lines, simplest configuration of seed 000 section 2.2)
+        # over-determined lines, simplest configuration of seed 000 section 2.2). Every such edge up to where
+        # the line stops: past one grazed (a table's near leg), the lines meeting the next (its far leg) end here
         for side in range(2):
             if ng > 3:
                 break
             g = first - 1 if side == 0 else last + 1
-            n_extra = 0
             while 0 <= g < n_groups:
                 n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
                                       g_lo[g], g_hi[g], tol, extras)  # fmt: skip
-                masked = False
+                # the edge lies on a face the line ends on (a box's edge against the wall)
+                on_face = False
+                if n_extra > 0:
+                    for i in range(g_lo[g], g_hi[g]):
+                        on_face = on_face or c_kind[i] == CONTACT_INTERIOR
                 for x in range(n_extra):
-                    masked = masked or edge_mask[extras[x]]
-                if masked:
-                    break
-                n_extra = 0
+                    extra = extras[x]
+                    if not edge_mask[extra]:
+                        continue
+                    # the rows bounded per candidate cover one edge; a seam of several needs more
+                    need = 4
+                    if ng == 2:
+                        need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
+                    while n_inc + need > incidences.node.shape[0]:
+                        incidences = _grown(incidences, n_inc)
+                    for j in range(ng):
+                        if gk[j] != GEN_VERTEX:
+                            continue
+                        n_retained = 0
+                        norm = -1
+                        for k in range(ng + 1):
+                            if k == j:
+                                continue
+                            r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
+                            r_id[n_retained] = gid[k] if k < ng else extra
+                            r_group[n_retained] = gg[k] if k < ng else g
+                            if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
+                                norm = n_retained
+                            n_retained += 1
+                        norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                        first_row = n_inc
+                        for sigma in (1.0, -1.0):
+                            n_inc = _relax(
+                                geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
+                                node,
+                            )  # fmt: skip
+                        # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
+                        # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
+                        # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
+                        # corner (a rug's, lines along the floor): the lines slide over that polygon either way
+                        if (on_face or flat[j]) and n_inc == first_row + 2 and \
+                                _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
+                            n_inc = first_row
+                    # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
+                    # well (the contact on either edge reaches its vertex at once)
+                    if ng == 2:
+                        n_inc = _swaths_leaving_both_vertices(
+                            geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                            gg, extra, g,
+                        )  # fmt: skip
                 if _group_blocked(
                     points, offsets, normals, c_poly, c_kind, c_local, g_lo[g], g_hi[g], u, angle_tol,
                     arc_start, arc_len, bounds,
                 ):  # fmt: skip
                     break
                 g = g - 1 if side == 0 else g + 1
-            # the edge lies on a face the line ends on (a box's edge against the wall)
-            on_face = False
-            if n_extra > 0:
-                for i in range(g_lo[g], g_hi[g]):
-                    on_face = on_face or c_kind[i] == CONTACT_INTERIOR
-            for x in range(n_extra):
-                extra = extras[x]
-                if not edge_mask[extra]:
-                    continue
-                # the rows bounded per candidate cover one edge; a seam of several needs more
-                need = 4
-                if ng == 2:
-                    need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
-                while n_inc + need > incidences.node.shape[0]:
-                    incidences = _grown(incidences, n_inc)
-                for j in range(ng):
-                    if gk[j] != GEN_VERTEX:
-                        continue
-                    n_retained = 0
-                    norm = -1
-                    for k in range(ng + 1):
-                        if k == j:
-                            continue
-                        r_kind[n_retained] = gk[k] if k < ng else GEN_EDGE
-                        r_id[n_retained] = gid[k] if k < ng else extra
-                        r_group[n_retained] = gg[k] if k < ng else g
-                        if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
-                            norm = n_retained
-                        n_retained += 1
-                    norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
-                    first_row = n_inc
-                    for sigma in (1.0, -1.0):
-                        n_inc = _relax(
-                            geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
-                            node,
-                        )  # fmt: skip
-                    # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
-                    # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
-                    # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
-                    # corner (a rug's, lines along the floor): the lines slide over that polygon either way
-                    if (on_face or flat[j]) and n_inc == first_row + 2 and \
-                            _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
-                        n_inc = first_row
-                # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
-                # well (the contact on either edge reaches its vertex at once)
-                if ng == 2:
-                    n_inc = _swaths_leaving_both_vertices(
-                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
-                        gg, extra, g,
-                    )  # fmt: skip
         # so do they where the edge is grazed between the two vertices (three generators on one line: a box's
         # corner, the top edge of a box and the corner of a box floating beyond, aligned)
         if ng == 2:
@@ -2247,6 +2310,17 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
                         gg, extras[x], g,
                     )  # fmt: skip
+                # or a third corner grazed there (a box's corner on a seam, a box's top corner and the room's
+                # corner, aligned): the EEE swaths through an edge at each corner
+                for i in range(g_lo[g], g_hi[g]):
+                    if c_kind[i] != CONTACT_VERTEX:
+                        continue
+                    corner = corner_vertex[offsets[c_poly[i]] + c_local[i]]
+                    if not _vertex_met_before(line, corner_vertex, offsets, g, i, corner):
+                        incidences, n_inc = _swaths_leaving_three_corners(
+                            geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
+                            gid, gg, corner, g,
+                        )  # fmt: skip
 
         # an FXE node ends the EEE swath of the lines through its crossing point meeting its third edge: all
         # three generators are kept and the contact on the third edge slides either way
