@@ -1215,23 +1215,13 @@ def _relaxed_arc(
 
 
 @njit_leaf
-def _edge_met_before(line, corner_edge, offsets, g, i, e):
-    """Whether one of the contacts of group g of the line before contact i is with edge e (an edge met by its
-    faces gives a contact per face)."""
+def _met_before(line, corner_element, offsets, g, i, contact_kind, element):
+    """Whether one of the contacts of group g of the line before contact i is of contact_kind (CONTACT_EDGE or
+    CONTACT_VERTEX) with `element` (an edge or vertex met by its faces gives a contact per face); corner_element:
+    the scene's corner_edge or corner_vertex, to match the kind."""
     for earlier in range(line.g_lo[g], i):
-        if line.c_kind[earlier] == CONTACT_EDGE and \
-                corner_edge[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == e:  # fmt: skip
-            return True
-    return False
-
-
-@njit_leaf
-def _vertex_met_before(line, corner_vertex, offsets, g, i, v):
-    """Whether one of the contacts of group g of the line before contact i is with vertex v (a vertex met by its
-    faces gives a contact per face)."""
-    for earlier in range(line.g_lo[g], i):
-        if line.c_kind[earlier] == CONTACT_VERTEX and \
-                corner_vertex[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == v:  # fmt: skip
+        if line.c_kind[earlier] == contact_kind and \
+                corner_element[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == element:  # fmt: skip
             return True
     return False
 
@@ -1262,7 +1252,7 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
                     _parallel_edges(g_.vertices, edges, e_v, e, g_.tol):  # fmt: skip
                 continue
             # once per edge: its faces give a contact each, and a generator edge has its own arcs
-            repeated = _edge_met_before(line, corner_edge, offsets, g, i, e)
+            repeated = _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, e)
             for k in range(ng):
                 if gk[k] == GEN_EDGE and gid[k] == e:
                     repeated = True
@@ -1366,7 +1356,7 @@ def _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, v, g, out, pins):
             continue
         e = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
         if edge_mask[e] and edges[e, 0] != v and edges[e, 1] != v and \
-                not _edge_met_before(line, corner_edge, offsets, g, i, e):  # fmt: skip
+                not _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, e):  # fmt: skip
             out[count] = e
             pins[count] = -1
             count += 1
@@ -1451,7 +1441,7 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
         if w == v:
             continue
         # once per vertex: each of its faces gives a contact
-        if _vertex_met_before(line, corner_vertex, offsets, group_v, i, w):
+        if _met_before(line, corner_vertex, offsets, group_v, i, CONTACT_VERTEX, w):
             continue
         for slot_v in range(ve_off[v], ve_off[v + 1]):
             e_v = ve_edge[slot_v]
@@ -1537,7 +1527,7 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                     f = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
                     if not edge_mask[f] or edges[f, 0] == v or edges[f, 1] == v or \
                             _parallel_edges(vertices, edges, e, f, tol) or \
-                            _edge_met_before(line, corner_edge, offsets, g, i, f):  # fmt: skip
+                            _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, f):  # fmt: skip
                         continue
                     across = _edge_direction(vertices, edges, f, -1)
                     for slot in range(ve_off[v], ve_off[v + 1]):
@@ -1586,7 +1576,7 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
             if abs(_dot(_edge_direction(vertices, edges, e, -1), normal)) > g_.angle_tol * normal_len:
                 continue
             # once per edge: each of its faces gives a contact
-            if _edge_met_before(line, g_.corner_edge, g_.offsets, g, i, e):
+            if _met_before(line, g_.corner_edge, g_.offsets, g, i, CONTACT_EDGE, e):
                 continue
             if n_inc + 4 > incidences.node.shape[0]:
                 incidences = _grown(incidences, n_inc)
@@ -2181,7 +2171,7 @@ def _validate_chunk(
                     continue
                 extra = corner_edge[offsets[c_poly[i]] + c_local[i]]
                 if not edge_mask[extra] or edges[extra, 0] == gid[j] or edges[extra, 1] == gid[j] or \
-                        _edge_met_before(line, corner_edge, offsets, g, i, extra):  # fmt: skip
+                        _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, extra):  # fmt: skip
                     continue
                 # the relaxed arcs and the junction's pencils (an edge of the vertex by a pivot edge)
                 need = 2 + 3 * (ve_off[gid[j] + 1] - ve_off[gid[j]])
@@ -2316,7 +2306,7 @@ def _validate_chunk(
                     if c_kind[i] != CONTACT_VERTEX:
                         continue
                     corner = corner_vertex[offsets[c_poly[i]] + c_local[i]]
-                    if not _vertex_met_before(line, corner_vertex, offsets, g, i, corner):
+                    if not _met_before(line, corner_vertex, offsets, g, i, CONTACT_VERTEX, corner):
                         incidences, n_inc = _swaths_leaving_three_corners(
                             geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
                             gid, gg, corner, g,
