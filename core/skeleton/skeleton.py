@@ -739,17 +739,20 @@ def _probe_directions(vertex, edge, piece_s, vertices, edges, shift):
     """(K, 3) float64: from each piece's vertex (K,) int64 to the middle of its piece of edge (K,) int64
     (piece_s (K, 2)), moved off the swath by `shift` (a length, signed: + the side cross(b - a, apex - a))."""
     directions = np.empty((vertex.shape[0], 3))
+    along = np.empty(3)
+    to_apex = np.empty(3)
+    swath = np.empty(3)
     for k in range(vertex.shape[0]):
         middle = 0.5 * (piece_s[k, 0] + piece_s[k, 1])
-        a = vertices[edges[edge[k], 0]]
-        b = vertices[edges[edge[k], 1]]
-        apex = vertices[vertex[k]]
-        along = b - a
-        to_apex = apex - a
-        swath = np.cross(along, to_apex)
+        a, b, apex = edges[edge[k], 0], edges[edge[k], 1], vertex[k]
+        for j in range(3):
+            along[j] = vertices[b, j] - vertices[a, j]
+            to_apex[j] = vertices[apex, j] - vertices[a, j]
+        for j in range(3):
+            swath[j] = along[(j + 1) % 3] * to_apex[(j + 2) % 3] - along[(j + 2) % 3] * to_apex[(j + 1) % 3]
         scale = shift / np.sqrt(swath[0] ** 2 + swath[1] ** 2 + swath[2] ** 2)
         for j in range(3):
-            directions[k, j] = a[j] + middle * along[j] + scale * swath[j] - apex[j]
+            directions[k, j] = vertices[a, j] + middle * along[j] + scale * swath[j] - vertices[apex, j]
     return directions
 
 
