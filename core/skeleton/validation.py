@@ -638,6 +638,36 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
 
 
 @njit_leaf
+def _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
+    """The retained edge the lines of an EEE arc turn about, else -1: with three edges met at three points of
+    the line, two of them spanning one plane (ends within tol of it) and the third piercing it, every line near
+    this one meeting the two lies in their plane (a line meeting both elsewhere passes through the point where
+    their lines cross, away from this line), so the lines meeting all three are the pencil of that plane about
+    the point where the third edge pierces it, and that edge's contact does not move."""
+    if n_retained != 3:
+        return -1
+    for k in range(3):
+        if r_kind[k] != GEN_EDGE or r_group[k] == r_group[(k + 1) % 3]:
+            return -1
+    for k in range(3):
+        a = r_id[(k + 1) % 3]
+        b = r_id[(k + 2) % 3]
+        if _parallel_edges(vertices, edges, a, b, tol):
+            continue
+        base = _row(vertices, edges[a, 0])
+        normal = _cross(_minus(_row(vertices, edges[a, 1]), base),
+                        _minus(_row(vertices, edges[b, 1]), _row(vertices, edges[b, 0])))  # fmt: skip
+        normal = _over(normal, np.sqrt(_dot(normal, normal)))
+        offset = -_dot(normal, base)
+        if _near_plane(_row(vertices, edges[b, 0]), normal, offset, tol) and \
+                _near_plane(_row(vertices, edges[b, 1]), normal, offset, tol) and \
+                not (_near_plane(_row(vertices, edges[r_id[k], 0]), normal, offset, tol) and
+                     _near_plane(_row(vertices, edges[r_id[k], 1]), normal, offset, tol)):  # fmt: skip
+            return k
+    return -1
+
+
+@njit_leaf
 def _through_own_solid(kind_a, id_a, kind_b, id_b, element_solid, vf_off, vf_face, ef_off, ef_face):
     """Whether generators a and b belong to one convex solid and bound no common face of it: lines meeting both
     (inside the edges: an arc's lines between its nodes) run through that solid between them."""
@@ -750,6 +780,16 @@ def _relaxed_arc(
         if n_retained != 3 or abs(_dot(across, u)) > angle_tol * np.sqrt(_dot(across, across)):
             return n_inc
         pencil = 3 - norm_index - norm_partner
+    # a pivot (see _pivot) moves by rounding only when solved for: held still, what meets the lines there
+    # meets all of them. Sliding it cannot normalise the motion (the system is singular: nearly so by
+    # rounding, a huge motion that is none), nor parametrise the arc (its lines would share one coordinate)
+    pivot = _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol)
+    if pivot >= 0:
+        lowest = True
+        for k in range(n_retained):
+            lowest = lowest and r_id[k] >= r_id[pivot]
+        if pivot == norm_index or lowest:
+            return n_inc
     for row in range(4):
         rhs[row] = 0.0
         for col in range(4):
@@ -927,6 +967,8 @@ def _relaxed_arc(
         for k in range(n_retained):
             if r_group[k] == g:
                 j = k
+        if pivot >= 0 and j == pivot:
+            delta = (0.0, 0.0, 0.0)
         blocked = False
         partner = _partner(pair, j)
         crossed = -1

@@ -11,11 +11,13 @@ import pytest
 
 from bench.scenes import SCENES as BENCH_SCENES
 from core.bvh import STACK_SIZE, build_bvh
-from core.skeleton.candidates import NodeCandidates
+from core.scene import EDGE_FLAT
+from core.skeleton.candidates import CANDIDATE_E4, NodeCandidates
 from core.skeleton.enumeration import iter_candidates
-from core.skeleton.validation import GEN_EDGE, GEN_VERTEX, _pierced_between
+from core.skeleton.topology import scene_topology
+from core.skeleton.validation import ARC_EEE, GEN_EDGE, GEN_VERTEX, _pierced_between, validate_candidates
 from tests.core.naive_enumeration import generator_masks
-from tests.core.skeleton_scenes import lamp_table_scene
+from tests.core.skeleton_scenes import boxes_in_room, lamp_table_scene
 
 SCENES = {
     "lamp table": lambda: lamp_table_scene().scene,
@@ -98,3 +100,76 @@ def test_early_rejection_only_rejects_lines_blocked_between_their_generators(nam
             f"{name}: candidate {c} rejected early, but nothing is crossed between its generators"
         )
     assert rejected > len(sample) // 10, f"{name}: only {rejected} of {len(sample)} rejected early"
+
+
+
+def _edge_between(scene, a, b) -> int:
+    """The scene edge joining points a and b (3,), either way."""
+    ends = scene.vertices[scene.edges]
+    joins = np.isclose(ends, [a, b]).all(axis=(1, 2)) | np.isclose(ends, [b, a]).all(axis=(1, 2))
+    return int(np.flatnonzero(joins)[0])
+
+
+#: tilts (radians, about a horizontal axis) of a node's line in the tests below: the rounding of a candidate line
+#: computed from its generators, well within the tolerance
+_TILTS = np.array([0.0, 3e-9, -3e-9, 1e-9, -1e-9, 1e-10, -1e-10, 1e-12, -1e-12])
+
+
+def _eee_arcs_on_tilted_lines(scene, edges, origin, along) -> list[list[int]]:
+    """Validate the E4 candidate of `edges` (4,) on the line origin + t along (horizontal) tilted by each of
+    _TILTS; all must be nodes. Returns the generators (sorted codes) of every EEE incidence of theirs."""
+    count = len(_TILTS)
+    directions = np.asarray(along) / np.linalg.norm(along) + _TILTS[:, None] * np.array([0.0, 0.0, 1.0])
+    candidates = NodeCandidates(
+        np.full(count, CANDIDATE_E4, np.int8), np.full((count, 2), -1, np.int64),
+        np.tile(edges, (count, 1)).astype(np.int64), np.tile(origin, (count, 1)).astype(np.float64), directions,
+    )  # fmt: skip
+    nodes, incidences, _ = validate_candidates(
+        scene, scene_topology(scene), build_bvh(scene), candidates, scene.edge_kind != EDGE_FLAT
+    )
+    assert len(nodes) == count
+    return [sorted(codes) for codes in incidences.codes[incidences.kind == ARC_EEE].tolist()]
+
+
+def test_pencil_turns_about_a_corner_lying_on_its_pivot_edge_on_every_node_line():
+    """office-432: a shelf board's corner lies on the shelf side's vertical edge, in the plane of a chair seat's top.
+    The lines of that plane through that point meeting the seat's edge and the board's far edge (an EEE arc whose
+    two edges in the plane hold its lines there: they turn about the point, the side's contact does not move) pass
+    the board's corner between those edges. The motion solved at an E4 node of these lines with a table leg's edge
+    moved that contact by rounding, which decided whether the lines crossed the board's faces at its corner: on
+    some lines they did not and the node had the arc, which the node at its other end, where they did, had not (it
+    dangled). Held still, the contact meets the corner on every line."""
+    top = 0.45
+    scene = boxes_in_room(
+        [((1.15, 0.8, 0.41), (1.6, 1.25, top)), ((1.15, 0.8, top), (1.6, 0.84, 0.9)),
+         ((2.0, 2.0, 0.0), (2.05, 2.05, 0.7)), ((2.8, 3.8, 0.0), (2.83, 4.15, 1.8)),
+         ((2.83, 3.8, top), (3.97, 4.15, 0.48))],
+        size=(6.8, 4.8, 2.7),
+    )  # fmt: skip
+    seat = _edge_between(scene, (1.6, 0.8, top), (1.6, 1.25, top))
+    leg = _edge_between(scene, (2.05, 2.0, 0.0), (2.05, 2.0, 0.7))
+    side = _edge_between(scene, (2.83, 3.8, 0.0), (2.83, 3.8, 1.8))
+    board = _edge_between(scene, (2.83, 4.15, top), (3.97, 4.15, top))
+    named = _eee_arcs_on_tilted_lines(scene, [seat, leg, side, board], (2.05, 2.0, top), (0.78, 1.8, 0.0))
+    assert sorted(scene.n_vertices + np.array([seat, side, board])) not in named
+
+
+def test_no_pencil_is_parametrised_by_its_pivot_edge():
+    """office-1056/1488's chairs and tables: a line of the plane of two chair seats' bottoms through the points where
+    two table legs' vertical edges pierce it, meeting an edge of each seat (an E4 node). Relaxing either leg's edge
+    leaves the pencil about the other's point, whose contact does not move: the system normalising the motion by
+    sliding it is singular, and on the line tilted by rounding it was nearly so, giving a huge motion and an arc
+    with both ends at that node, at one coordinate of the pivot (the lowest edge, which parametrises the arc):
+    office-1056's 2 and 12 of office-1488's 18 dangling arcs."""
+    bottom = 0.41
+    scene = boxes_in_room(
+        [((6.75, 2.0, 0.0), (6.8, 2.05, 0.7)), ((6.95, 1.7, 0.0), (7.0, 1.75, 0.7)),
+         ((7.15, 0.8, bottom), (7.6, 1.25, 0.45)), ((5.15, 2.8, bottom), (5.6, 3.25, 0.45))],
+        size=(8.8, 8.8, 2.7),
+    )  # fmt: skip
+    legs = [_edge_between(scene, (x, y, 0.0), (x, y, 0.7)) for x, y in ((6.75, 2.0), (7.0, 1.75))]
+    seats = [_edge_between(scene, (7.15, 1.25, bottom), (7.6, 1.25, bottom)),
+             _edge_between(scene, (5.6, 2.8, bottom), (5.6, 3.25, bottom))]  # fmt: skip
+    assert max(legs) < min(seats)
+    named = _eee_arcs_on_tilted_lines(scene, [seats[1], *legs, seats[0]], (6.75, 2.0, bottom), (1.0, -1.0, 0.0))
+    assert not any(scene.n_vertices + leg in codes for codes in named for leg in legs)
