@@ -718,6 +718,20 @@ def _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
     return -1, -1
 
 
+@njit_leaf
+def _end_on_edge(vertices, edges, a, b, tol):
+    """Whether an end of edge a lies within tol of edge b."""
+    base = _row(vertices, edges[b, 0])
+    along = _minus(_row(vertices, edges[b, 1]), base)
+    for end in range(2):
+        off = _minus(_row(vertices, edges[a, end]), base)
+        t = min(max(_dot(off, along) / _dot(along, along), 0.0), 1.0)
+        gap = _minus(off, _scaled(along, t))
+        if _dot(gap, gap) <= tol * tol:
+            return True
+    return False
+
+
 @njit(cache=True)
 def _partner(pair, j):
     """The other member of the crossing pair (a, b) when j is one of them, else -1."""
@@ -780,6 +794,12 @@ def _relaxed_arc(
         if n_retained != 3 or abs(_dot(across, u)) > angle_tol * np.sqrt(_dot(across, across)):
             return n_inc
         pencil = 3 - norm_index - norm_partner
+    elif pair[0] >= 0 and (_end_on_edge(vertices, edges, r_id[pair[0]], r_id[pair[1]], tol)
+                           or _end_on_edge(vertices, edges, r_id[pair[1]], r_id[pair[0]], tol)):  # fmt: skip
+        # the lines kept through the crossing are those through a vertex when it ends one of the edges (a chair
+        # leg's top corner on the seat's bottom edge: no crossing of interiors, which FXE nodes stand for): that
+        # vertex's EV arcs, which the nodes through it name so
+        return n_inc
     # a pivot (see _pivot) moves by rounding only when solved for: held still, what meets the lines there
     # meets all of them. Sliding it cannot normalise the motion (the system is singular: nearly so by
     # rounding, a huge motion that is none), nor parametrise the arc (its lines would share one coordinate)
