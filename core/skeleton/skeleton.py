@@ -26,7 +26,7 @@ from ..bvh import build_bvh
 from ..errors import CancelledError, SceneError, VisradError
 from ..formfactor import clip_to_hemisphere, lambert_sum
 from ..jit import njit_leaf
-from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _contact_arc, _perpendicular_frame, first_hits
+from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _perpendicular_frame, first_hits
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
@@ -42,6 +42,7 @@ from .validation import (
     WORKERS,
     IncidenceChunk,
     NodeChunk,
+    _enters,
     element_solids,
     validate_candidates,
 )
@@ -1688,53 +1689,6 @@ def _leaves_freely(v, direction, points, offsets, normals, vf_off, vf_face, vf_c
                 corners[count] = ef_local[i]
                 count += 1
         if _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine, angles):
-            return False
-    return True
-
-
-@njit_leaf
-def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine, angles):
-    """Whether a line leaving a point along unit `direction` (frame e1, e2 across it) enters a solid whose
-    faces meet there: faces[:count] touched as kinds[:count] (CONTACT_VERTEX at corner, CONTACT_EDGE along the
-    edge from corner) wind -1 around every direction, counted with the sign of normal . direction. Faces seen
-    edge-on (sliding) count nothing; with none left the line enters nothing. angles: scratch (5+, 2 count)."""
-    starts = angles[0]
-    lengths = angles[1]
-    signs = angles[2]
-    bounds = angles[3]
-    n = 0
-    for i in range(count):
-        face = faces[i]
-        rate = normals[face, 0] * direction[0] + normals[face, 1] * direction[1] + normals[face, 2] * direction[2]
-        if abs(rate) <= cosine:
-            continue
-        starts[n], lengths[n] = _contact_arc(points, offsets, normals, faces[i], kinds[i], corners[i], e1, e2)
-        signs[n] = 1.0 if rate > 0.0 else -1.0
-        bounds[2 * n] = starts[n]
-        bounds[2 * n + 1] = (starts[n] + lengths[n]) % (2.0 * np.pi)
-        n += 1
-    if n == 0:
-        return False
-    # sorted by insertion (a few arcs; numba's sort would need its runtime)
-    ordered = angles[4]
-    for k in range(2 * n):
-        value = bounds[k]
-        j = k
-        while j > 0 and ordered[j - 1] > value:
-            ordered[j] = ordered[j - 1]
-            j -= 1
-        ordered[j] = value
-    for k in range(2 * n):
-        lo = ordered[k]
-        hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + 2.0 * np.pi
-        if hi - lo <= cosine:
-            continue
-        middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
-        winding = 0.0
-        for j in range(n):
-            if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
-                winding += signs[j]
-        if winding >= 0.0:
             return False
     return True
 

@@ -135,7 +135,7 @@ over, from sl_a to sl_b."""
 _Scratch = namedtuple(
     "_Scratch",
     "polys kinds locals_ arc_start arc_len bounds in_plane system rhs solution order codes touch touch_face planar "
-    "behind",
+    "behind angles",
 )
 """Work arrays of one thread, reused for every line and arc (see _new_scratch)."""
 
@@ -200,13 +200,14 @@ def _combined(x, a, y, b):
 def _new_scratch(size):
     """_Scratch for lines of up to `size` contacts and faces around a generator: polys, kinds (int8), locals_,
     arc_start, arc_len (size,); bounds (2 size,); in_plane (size,) bool; system (4, 4), rhs, solution (4,);
-    order, codes (3,) int64; touch, planar (2,) bool; touch_face, behind (2,) int64."""
+    order, codes (3,) int64; touch, planar (2,) bool; touch_face, behind (2,) int64; angles (5, 2 size) (see
+    _enters)."""
     return _Scratch(
         np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int8), np.empty(size, dtype=np.int64),
         np.empty(size), np.empty(size), np.empty(2 * size), np.empty(size, dtype=np.bool_),
         np.empty((4, 4)), np.empty(4), np.empty(4), np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64),
         np.empty(2, dtype=np.bool_), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.bool_),
-        np.empty(2, dtype=np.int64),
+        np.empty(2, dtype=np.int64), np.empty((5, 2 * size)),
     )  # fmt: skip
 
 
@@ -272,6 +273,96 @@ def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, dire
             )
             members += 1
     return _arcs_cover_circle_with(arc_start, arc_len, members, angle_tol, bounds)
+
+
+@njit_leaf
+def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e1, e2, cosine, angles):
+    """Whether a line leaving a point along unit `direction` (frame e1, e2 across it) enters a solid whose
+    faces meet there: faces[:count] touched as kinds[:count] (CONTACT_VERTEX at corner, CONTACT_EDGE along the
+    edge from corner) wind -1 around every direction, counted with the sign of normal . direction. Faces seen
+    edge-on (sliding) count nothing, nor contacts of other kinds; with none left the line enters nothing. angles:
+    scratch (5+, 2 count)."""
+    starts = angles[0]
+    lengths = angles[1]
+    signs = angles[2]
+    bounds = angles[3]
+    n = 0
+    for i in range(count):
+        if kinds[i] != CONTACT_EDGE and kinds[i] != CONTACT_VERTEX:
+            continue
+        face = faces[i]
+        rate = normals[face, 0] * direction[0] + normals[face, 1] * direction[1] + normals[face, 2] * direction[2]
+        if abs(rate) <= cosine:
+            continue
+        starts[n], lengths[n] = _contact_arc(points, offsets, normals, faces[i], kinds[i], corners[i], e1, e2)
+        signs[n] = 1.0 if rate > 0.0 else -1.0
+        bounds[2 * n] = starts[n]
+        bounds[2 * n + 1] = (starts[n] + lengths[n]) % (2.0 * np.pi)
+        n += 1
+    if n == 0:
+        return False
+    # sorted by insertion (a few arcs; numba's sort would need its runtime)
+    ordered = angles[4]
+    for k in range(2 * n):
+        value = bounds[k]
+        j = k
+        while j > 0 and ordered[j - 1] > value:
+            ordered[j] = ordered[j - 1]
+            j -= 1
+        ordered[j] = value
+    for k in range(2 * n):
+        lo = ordered[k]
+        hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + 2.0 * np.pi
+        if hi - lo <= cosine:
+            continue
+        middle = (0.5 * (lo + hi)) % (2.0 * np.pi)
+        winding = 0.0
+        for j in range(n):
+            if (middle - starts[j]) % (2.0 * np.pi) < lengths[j]:
+                winding += signs[j]
+        if winding >= 0.0:
+            return False
+    return True
+
+
+@njit_leaf
+def _on_solid(poly, offsets, corner_edge, element_solid, n_vertices):
+    """Whether the polygon bounds a closed convex solid (see element_solids; corner_edge: the scene edge along
+    each polygon side): behind it lies that solid's inside, not the free space behind a single panel."""
+    return element_solid[n_vertices + corner_edge[offsets[poly]]] >= 0
+
+
+@njit_leaf
+def _goes_into_solid(points, offsets, normals, object_ids, corner_edge, element_solid, n_vertices, polys, kinds,
+                     locals_, count, direction, angle_tol, angles):
+    """Whether a line leaving the point of contacts polys, kinds, locals_ [:count] (all the faces there; put in
+    object order here) along unit `direction` goes into a solid: behind a face of a closed solid (corner_edge,
+    element_solid: see _on_solid) it crosses inside, or into an
+    object whose corners and edges meet there, each object winding on its own (see _enters: a line leaving one
+    box into another touching it winds zero in the sum). angles: scratch (5+, 2 count)."""
+    for i in range(count):
+        if kinds[i] == CONTACT_INTERIOR and _dot(_row(normals, polys[i]), direction) < -angle_tol and \
+                _on_solid(polys[i], offsets, corner_edge, element_solid, n_vertices):  # fmt: skip
+            return True
+    # in object order by insertion (a few contacts)
+    for i in range(1, count):
+        k = i
+        while k > 0 and object_ids[polys[k - 1]] > object_ids[polys[k]]:
+            polys[k - 1], polys[k] = polys[k], polys[k - 1]
+            kinds[k - 1], kinds[k] = kinds[k], kinds[k - 1]
+            locals_[k - 1], locals_[k] = locals_[k], locals_[k - 1]
+            k -= 1
+    e1, e2 = _perpendicular_frame(direction)
+    lo = 0
+    while lo < count:
+        hi = lo + 1
+        while hi < count and object_ids[polys[hi]] == object_ids[polys[lo]]:
+            hi += 1
+        if _enters(points, offsets, normals, polys[lo:hi], kinds[lo:hi], locals_[lo:hi], hi - lo, direction, e1, e2,
+                   angle_tol, angles):  # fmt: skip
+            return True
+        lo = hi
+    return False
 
 
 @njit_leaf
@@ -753,24 +844,24 @@ def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, sc
     r_kind, r_id, r_group, r_pin = retained
     return _relaxed_arc(
         g.points, g.offsets, g.normals, g.areas, g.vertices, g.edges, g.vf_off, g.vf_face, g.vf_corner, g.ef_off,
-        g.ef_face, g.ef_local, g.face_group, g.object_ids, g.element_solid, g.diag, g.tol, g.angle_tol,
-        line.c_poly, line.c_kind, line.c_local, line.g_lo, line.g_hi, line.g_tau, line.n_groups, line.sl_poly,
-        line.sl_a, line.sl_b, line.n_sliding, line.start, line.u, line.f1, line.f2,
+        g.ef_face, g.ef_local, g.corner_edge, g.face_group, g.object_ids, g.element_solid, g.diag, g.tol,
+        g.angle_tol, line.c_poly, line.c_kind, line.c_local, line.g_lo, line.g_hi, line.g_tau, line.n_groups,
+        line.sl_poly, line.sl_a, line.sl_b, line.n_sliding, line.start, line.u, line.f1, line.f2,
         r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
         scratch.polys, scratch.kinds, scratch.locals_, scratch.arc_start, scratch.arc_len, scratch.bounds,
         scratch.in_plane, scratch.system, scratch.rhs, scratch.solution, scratch.order, scratch.codes, scratch.touch,
-        scratch.touch_face, scratch.planar, scratch.behind, incidences, n_inc, node,
+        scratch.touch_face, scratch.planar, scratch.behind, scratch.angles, incidences, n_inc, node,
     )  # fmt: skip
 
 
 @njit_leaf
 def _relaxed_arc(
     points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-    face_group, object_ids, element_solid, diag, tol, angle_tol,
+    corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol,
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2,
     r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
     polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
-    planar, behind, incidences, n_inc, node,
+    planar, behind, angles, incidences, n_inc, node,
 ):  # fmt: skip
     """One arc adjacent to a node, recorded at row n_inc of `incidences` (_Incidences) when it exists; returns
     the next free row. The scene (_Geometry fields), the node's line (_Line fields, the frame f1, f2
@@ -932,6 +1023,24 @@ def _relaxed_arc(
         crossing = -offset / rate * diag
         if crossing < sl_a[k] - tol or crossing > sl_b[k] + tol:
             continue
+        at = -1
+        if abs(crossing - g_tau[first]) <= tol:
+            at = 0
+        elif abs(crossing - g_tau[last]) <= tol:
+            at = 1
+        outer_vertex = False
+        for j in range(n_retained):
+            if at >= 0 and r_group[j] == (first if at == 0 else last) and r_kind[j] == GEN_VERTEX:
+                outer_vertex = True
+        # from an outer vertex towards the other generators the lines go behind a face lying along them there
+        # (its own face when the node's line runs over it, a table top over a leg's top corner): they run inside
+        # that face's object (an interior swath, seed 003 section 3.1, which bounds no view)
+        if outer_vertex and (rate < 0.0) == (at == 0) and \
+                _on_solid(sl_poly[k], offsets, corner_edge, element_solid, vertices.shape[0]) and \
+                _inside_to_first_order(points, offsets, normals, sl_poly[k],
+                                       _along(start, g_tau[first if at == 0 else last], u),
+                                       u if at == 0 else _negated(u), tol, True):  # fmt: skip
+            return n_inc
         handled = False
         for j in range(n_retained):
             if abs(g_tau[r_group[j]] - crossing) <= tol and _is_incident_face(
@@ -943,11 +1052,6 @@ def _relaxed_arc(
         # a face of another object crossed at an outer generator (a box corner or edge resting on the floor):
         # the lines end there as at the arc's nodes where they do not lie in that face's plane: stopped by a
         # vertex, on the face beyond an edge
-        at = -1
-        if abs(crossing - g_tau[first]) <= tol:
-            at = 0
-        elif abs(crossing - g_tau[last]) <= tol:
-            at = 1
         if at >= 0:
             for j in range(n_retained):
                 if r_group[j] == (first if at == 0 else last):
@@ -1035,6 +1139,14 @@ def _relaxed_arc(
             blocked = _group_blocked(
                 points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start, arc_len, bounds
             )
+            # an outer vertex stops the lines where they go into a solid (its own, or the one it rests on):
+            # behind it, not on the generators' side, where they would run inside that solid (an interior swath,
+            # seed 003 section 3.1, which bounds no view)
+            if blocked and (g == first or g == last) and _goes_into_solid(
+                points, offsets, normals, object_ids, corner_edge, element_solid, vertices.shape[0], polys, kinds,
+                locals_, count, tilted if g == first else _negated(tilted), angle_tol, angles,
+            ):  # fmt: skip
+                return n_inc
         elif j >= 0:
             # the contact slides along the kept edge, so its position on the line moves too: a face met at
             # the same point is in front of the edge (the arc does not exist) or behind it (the line stops).
