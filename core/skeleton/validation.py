@@ -2280,6 +2280,11 @@ def _validate_chunk(
             ):  # fmt: skip
                 blocked = True
                 break
+        # a box's opposite corners: the line between them runs inside the box (its space diagonal, no node; the
+        # swaths through the corners along it are interior ones, rejected where they start)
+        if ng == 2 and _through_own_solid(gk[0], gid[0], gk[1], gid[1], element_solid, vf_off, vf_face, ef_off,
+                                          ef_face):  # fmt: skip
+            blocked = True
         if blocked:
             counters[REJECT_BLOCKED] += 1
             continue

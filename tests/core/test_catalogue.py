@@ -23,11 +23,9 @@ the VV, VEE, EVE and E4 nodes. Left out:
 
 `test_restriction_leaves_most_nodes_checked` bounds the nodes left out.
 
-Two departures of the skeleton from the catalogue are kept as strict xfails, so that they are seen and turn
-into failures the day they are resolved:
+One departure of the skeleton from the catalogue is kept as a strict xfail, so that it is seen and turns into
+a failure the day it is resolved:
 
-* the lines through two opposite corners of a box (its space diagonals) are VV nodes, with no arc, although
-  the line runs inside the box between them (it crosses no face, only corners);
 * the families of lines meeting two parallel edges (two edges of the room) and a third edge are left out
   (core.skeleton.validation._coplanar_swath, "simplest configuration"); the geometry says they are arcs,
   planar pencils about the point where the third edge crosses the parallel edges' plane. Their nodes (VEE
@@ -169,18 +167,11 @@ def test_every_move_is_judged_off_face_planes(name):
 @pytest.mark.parametrize("name", ROOMS)
 def test_every_node_has_its_catalogue_arcs(name):
     """No arc missing, none spurious, at every checked node: the generators and the way each arc leaves (the
-    families with two parallel edges apart, see test_parallel_edge_pencils_are_arcs). The box space diagonals
-    (see test_every_node_is_a_critical_line) are compared too: no move off them is free, and they have no arc."""
+    families with two parallel edges apart, see test_parallel_edge_pencils_are_arcs)."""
     wrong = [c.describe(c.expected, c.found) for c in _catalogue(name).checks if c.expected != c.found]
     assert wrong == [], f"{len(wrong)} nodes:\n" + "\n".join(wrong[:20])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="core keeps a box's space diagonals (the line through two opposite corners, inside the box between "
-    "them) as VV nodes without arcs: the line crosses no face, only the two corners",
-)
 @pytest.mark.parametrize("name", ROOMS)
 def test_every_node_is_a_critical_line(name):
     """Every checked node's line meets its generators and is free between the first and the last (lines in a
