@@ -337,9 +337,9 @@ def _goes_into_solid(points, offsets, normals, object_ids, corner_edge, element_
                      locals_, count, direction, angle_tol, angles):
     """Whether a line leaving the point of contacts polys, kinds, locals_ [:count] (all the faces there; put in
     object order here) along unit `direction` goes into a solid: behind a face of a closed solid (corner_edge,
-    element_solid: see _on_solid) it crosses inside, or into an
-    object whose corners and edges meet there, each object winding on its own (see _enters: a line leaving one
-    box into another touching it winds zero in the sum). angles: scratch (5+, 2 count)."""
+    element_solid: see _on_solid) it crosses inside, or into an object whose corners and edges meet there, each
+    object winding on its own (see _enters: a line leaving one box into another touching it winds zero in the
+    sum). angles: scratch (5+, 2 count)."""
     for i in range(count):
         if kinds[i] == CONTACT_INTERIOR and _dot(_row(normals, polys[i]), direction) < -angle_tol and \
                 _on_solid(polys[i], offsets, corner_edge, element_solid, n_vertices):  # fmt: skip
@@ -694,8 +694,9 @@ def _shared_face(ef_off, ef_face, e, f):
 
 @njit_leaf
 def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
-    """Whether an EEE arc's three edges share a plane, two of them are parallel or two bound one face: the
-    degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events."""
+    """Whether an EEE arc's three edges share a plane or two bound one face: the degenerate edge triples the
+    paper rejects (1999, section 2.2); they are not visual events. Two parallel edges and a third piercing their
+    plane are one: the pencil of that plane about the piercing point (see _pivot), unless _aligned_pencil."""
     if n == 3 and r_kind[0] == GEN_EDGE and r_kind[1] == GEN_EDGE and r_kind[2] == GEN_EDGE:
         # two edges of one face: a line meeting both inside them lies in the face's plane (or passes through
         # their common vertex), so the family is the face's pencil through the third edge's crossing point, an
@@ -704,11 +705,8 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
             for k in range(j + 1, 3):
                 if _shared_face(ef_off, ef_face, r_id[j], r_id[k]):
                     return True
-        # two parallel edges: every line meeting both lies in their plane, a pencil through the third edge's
-        # crossing point, which the simplest-configuration rule leaves out (no EEE visual event there)
-        for j in range(3):
-            for k in range(j + 1, 3):
-                if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol):
+                if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol) and \
+                        _aligned_pencil(vertices, edges, r_id[j], r_id[k], r_id[3 - j - k], tol):  # fmt: skip
                     return True
         a = _row(vertices, edges[r_id[0], 0])
         tip = _minus(_row(vertices, edges[r_id[0], 1]), a)
@@ -729,12 +727,55 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
 
 
 @njit_leaf
+def _aligned_pencil(vertices, edges, a, b, c, tol):
+    """Whether the pencil of lines meeting parallel edges a and b and edge c (in the plane of a and b, about the
+    point X where c pierces it) is degenerate, the simplest-configuration rule of seed 000 section 2.2 leaving
+    it out: X lies on a or b (c crosses it: the pencils of a crossing, see FXE nodes), or one of its lines
+    passes through an end of a and an end of b at once (their ends and X aligned: boxes of one height, a
+    corner edge and a box edge ending on the floor), or c does not pierce the plane."""
+    base = _row(vertices, edges[a, 0])
+    normal = _cross(_minus(_row(vertices, edges[a, 1]), base), _minus(_row(vertices, edges[b, 0]), base))
+    length = np.sqrt(_dot(normal, normal))
+    if length == 0.0:
+        return True
+    normal = _over(normal, length)
+    c0 = _row(vertices, edges[c, 0])
+    span = _minus(_row(vertices, edges[c, 1]), c0)
+    rate = _dot(normal, span)
+    if abs(rate) <= tol:
+        return True
+    pivot = _along(c0, _dot(normal, _minus(base, c0)) / rate, span)
+    if _segment_gap(vertices, edges, a, pivot) <= tol or _segment_gap(vertices, edges, b, pivot) <= tol:
+        return True
+    for end_a in range(2):
+        for end_b in range(2):
+            p = _row(vertices, edges[a, end_a])
+            across = _minus(_row(vertices, edges[b, end_b]), p)
+            off = _cross(across, _minus(pivot, p))
+            if _dot(off, off) <= tol * tol * _dot(across, across):
+                return True
+    return False
+
+
+@njit_leaf
+def _segment_gap(vertices, edges, e, point):
+    """The distance from a point (3-vector) to edge e."""
+    base = _row(vertices, edges[e, 0])
+    along = _minus(_row(vertices, edges[e, 1]), base)
+    off = _minus(point, base)
+    t = min(max(_dot(off, along) / _dot(along, along), 0.0), 1.0)
+    gap = _minus(off, _scaled(along, t))
+    return np.sqrt(_dot(gap, gap))
+
+
+@njit_leaf
 def _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
     """The retained edge the lines of an EEE arc turn about, else -1: with three edges met at three points of
     the line, two of them spanning one plane (ends within tol of it) and the third piercing it, every line near
     this one meeting the two lies in their plane (a line meeting both elsewhere passes through the point where
-    their lines cross, away from this line), so the lines meeting all three are the pencil of that plane about
-    the point where the third edge pierces it, and that edge's contact does not move."""
+    their lines cross, away from this line; parallel ones never cross), so the lines meeting all three are the
+    pencil of that plane about the point where the third edge pierces it, and that edge's contact does not
+    move."""
     if n_retained != 3:
         return -1
     for k in range(3):
@@ -743,12 +784,15 @@ def _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
     for k in range(3):
         a = r_id[(k + 1) % 3]
         b = r_id[(k + 2) % 3]
-        if _parallel_edges(vertices, edges, a, b, tol):
-            continue
         base = _row(vertices, edges[a, 0])
-        normal = _cross(_minus(_row(vertices, edges[a, 1]), base),
-                        _minus(_row(vertices, edges[b, 1]), _row(vertices, edges[b, 0])))  # fmt: skip
-        normal = _over(normal, np.sqrt(_dot(normal, normal)))
+        # parallel edges span the plane holding one and the other's first end
+        across = _minus(_row(vertices, edges[b, 0]), base) if _parallel_edges(vertices, edges, a, b, tol) else \
+            _minus(_row(vertices, edges[b, 1]), _row(vertices, edges[b, 0]))  # fmt: skip
+        normal = _cross(_minus(_row(vertices, edges[a, 1]), base), across)
+        length = np.sqrt(_dot(normal, normal))
+        if length == 0.0:
+            continue
+        normal = _over(normal, length)
         offset = -_dot(normal, base)
         if _near_plane(_row(vertices, edges[b, 0]), normal, offset, tol) and \
                 _near_plane(_row(vertices, edges[b, 1]), normal, offset, tol) and \
@@ -812,15 +856,8 @@ def _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
 @njit_leaf
 def _end_on_edge(vertices, edges, a, b, tol):
     """Whether an end of edge a lies within tol of edge b."""
-    base = _row(vertices, edges[b, 0])
-    along = _minus(_row(vertices, edges[b, 1]), base)
-    for end in range(2):
-        off = _minus(_row(vertices, edges[a, end]), base)
-        t = min(max(_dot(off, along) / _dot(along, along), 0.0), 1.0)
-        gap = _minus(off, _scaled(along, t))
-        if _dot(gap, gap) <= tol * tol:
-            return True
-    return False
+    return _segment_gap(vertices, edges, b, _row(vertices, edges[a, 0])) <= tol or \
+        _segment_gap(vertices, edges, b, _row(vertices, edges[a, 1])) <= tol  # fmt: skip
 
 
 @njit(cache=True)

@@ -23,13 +23,10 @@ the VV, VEE, EVE and E4 nodes. Left out:
 
 `test_restriction_leaves_most_nodes_checked` bounds the nodes left out.
 
-One departure of the skeleton from the catalogue is kept as a strict xfail, so that it is seen and turns into
-a failure the day it is resolved:
-
-* the families of lines meeting two parallel edges (two edges of the room) and a third edge are left out
-  (core.skeleton.validation._coplanar_swath, "simplest configuration"); the geometry says they are arcs,
-  planar pencils about the point where the third edge crosses the parallel edges' plane. Their nodes (VEE
-  through a room corner, E4 through two parallel room edges) are checked here for their other arcs.
+The families of lines meeting two parallel edges (two edges of the room) and a third edge are planar pencils
+about the point where the third edge crosses the parallel edges' plane, not reguli: they are checked apart
+(`test_parallel_edge_pencils_are_arcs`), at VEE nodes through a room corner and E4 nodes through two parallel
+room edges.
 """
 
 from __future__ import annotations
@@ -180,13 +177,6 @@ def test_every_node_is_a_critical_line(name):
     assert wrong == [], f"{len(wrong)} nodes:\n" + "\n".join(wrong)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="core leaves out the EEE families with two parallel edges (validation._coplanar_swath): at VEE "
-    "nodes through a room corner and E4 nodes through two parallel room edges, the planar pencils of lines "
-    "meeting two parallel room edges and a box edge are missing",
-)
 @pytest.mark.parametrize("name", ROOMS)
 def test_parallel_edge_pencils_are_arcs(name):
     """The families of lines meeting two parallel edges and a third one are arcs wherever the oracle finds them

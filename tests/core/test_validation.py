@@ -160,7 +160,7 @@ def test_no_pencil_is_parametrised_by_its_pivot_edge():
     leaves the pencil about the other's point, whose contact does not move: the system normalising the motion by
     sliding it is singular, and on the line tilted by rounding it was nearly so, giving a huge motion and an arc
     with both ends at that node, at one coordinate of the pivot (the lowest edge, which parametrises the arc):
-    office-1056's 2 and 12 of office-1488's 18 dangling arcs."""
+    office-1056's 2 and 12 of office-1488's 18 dangling arcs. No arc keeps both seats' edges."""
     bottom = 0.41
     scene = boxes_in_room(
         [((6.75, 2.0, 0.0), (6.8, 2.05, 0.7)), ((6.95, 1.7, 0.0), (7.0, 1.75, 0.7)),
@@ -172,4 +172,8 @@ def test_no_pencil_is_parametrised_by_its_pivot_edge():
              _edge_between(scene, (5.6, 2.8, bottom), (5.6, 3.25, bottom))]  # fmt: skip
     assert max(legs) < min(seats)
     named = _eee_arcs_on_tilted_lines(scene, [seats[1], *legs, seats[0]], (6.75, 2.0, bottom), (1.0, -1.0, 0.0))
-    assert not any(scene.n_vertices + leg in codes for codes in named for leg in legs)
+    seat_codes = {scene.n_vertices + seat for seat in seats}
+    assert not any(seat_codes <= set(codes) for codes in named)
+    # relaxing a seat's edge leaves the two legs, parallel: the pencil of their plane about the point where the
+    # other seat's edge pierces it, parametrised by a leg (not its pivot), is an arc
+    assert any(set(scene.n_vertices + np.array(legs)) <= set(codes) for codes in named)
