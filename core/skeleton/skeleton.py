@@ -378,9 +378,11 @@ class Skeleton:
         cut in halves until each piece's middle lies within tol.curve of its chord (at most _TRACE_SAMPLES
         points)."""
         scene = self.scene
+        # a writable copy whatever the caller passes (a row of the scene's read-only normals): a read-only array
+        # is another signature, which numba would compile on the first query that traces one (seconds)
         return _traced(
             self.arcs.kind[arc], self.arcs.codes[arc], self.arcs.s[arc, 0], self.arcs.s[arc, 1], scene.vertices,
-            scene.edges, scene.n_vertices, np.asarray(normal, dtype=np.float64), float(offset),
+            scene.edges, scene.n_vertices, np.array(normal, dtype=np.float64), float(offset),
             scene.bbox_min - scene.diagonal, scene.bbox_max + scene.diagonal, scene.tol.cosine, scene.tol.curve,
         )  # fmt: skip
 
