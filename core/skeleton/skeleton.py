@@ -943,7 +943,10 @@ def _resized(values, size):
 def _arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, touched, found):
     """The (surface, surface) pairs arc `arc` joins, each once as (lower, higher), into found (2, K); returns
     K. The surfaces touched at each end are the ones its lines end on (as found at either node, ends (A, 2,
-    2)) and those around its outer generator (the lines graze it or stop on it); touched (2, 64) scratch."""
+    2)) and those around its outer generator (the lines graze it or stop on it); a pair needs a surface the
+    lines end on at one end at least: lines grazing both surfaces at their generators run on past both and
+    join neither (a lamp's corner and the edge of the floor along a wall: the wall is no blocker between the
+    lamp and the floor). touched (2, 64) scratch."""
     last = 1 if kind[arc] == ARC_EV else 2
     sizes = (
         _touched(codes[arc, 0], ends[arc, 0, 0], ends[arc, 1, 0], n_vertices, vf_off, vf_face, ef_off, ef_face,
@@ -952,8 +955,10 @@ def _arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_f
                  face_group, touched[1]),
     )  # fmt: skip
     n = 0
-    for i in range(sizes[0]):
-        for j in range(sizes[1]):
+    for i in range(sizes[0][0]):
+        for j in range(sizes[1][0]):
+            if i >= sizes[0][1] and j >= sizes[1][1]:
+                continue
             a = min(touched[0, i], touched[1, j])
             b = max(touched[0, i], touched[1, j])
             if a == b:
@@ -972,18 +977,20 @@ def _arc_pairs(arc, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_f
 
 @njit_leaf
 def _touched(code, end_at_start, end_at_end, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, out):
-    """The surfaces an arc's lines touch beyond generator `code`, into out; returns how many."""
+    """The surfaces an arc's lines touch beyond generator `code`, into out: first those they end on, then those
+    around the generator; returns (how many, how many they end on)."""
     count = 0
     for end in (end_at_start, end_at_end):
         if end >= 0:
             count = _add_unique(out, count, end)
+    ending = count
     if code < n_vertices:
         for i in range(vf_off[code], vf_off[code + 1]):
             count = _add_unique(out, count, face_group[vf_face[i]])
     else:
         for i in range(ef_off[code - n_vertices], ef_off[code - n_vertices + 1]):
             count = _add_unique(out, count, face_group[ef_face[i]])
-    return count
+    return count, ending
 
 
 @njit_leaf

@@ -23,7 +23,7 @@ from core.skeleton import skeleton as skeleton_module
 from core.skeleton.validation import ARC_EV, END_FREE, END_TERMINAL, GEN_NONE, GEN_VERTEX
 from core.visibility import exact_form_factors
 from tests.core.furnished_rooms import box_quads, furnished_room
-from tests.core.naive_skeleton import swath_line
+from tests.core.naive_skeleton import blockers_by_removal, swath_line
 from tests.core.skeleton_scenes import box_over_floor_scene, boxes_in_room, generic_closed_room, lamp_table_scene
 
 EXACT = 1e-9
@@ -732,6 +732,28 @@ def test_furnished_rooms_have_no_dangling_arc():
     both sides of crossings, 5 393 in 186 before the crossing nodes."""
     dangling = {seed: _furnished_skeleton(seed).stats["dangling_arcs"] for seed in FURNISHED_SAMPLE}
     assert not any(dangling.values()), dangling
+
+
+# ----------------------------------------------------------------------------------------------------------
+# exact blockers (seed 003 section 4.4)
+
+
+def test_blockers_of_the_lamp_and_the_floor_are_exact():
+    """Issue 3: a small lamp lights a big table carrying small boxes, a box on the floor beside it
+    (skeleton_scenes.lamp_table_scene). The lamp -> floor blockers hold every polygon an unoccluded lamp -> floor
+    segment touches (a witness found by naive_skeleton.reaches: the table top's upper and side faces, the floor
+    box's), none of those no such segment can touch (proved: the legs and the objects on the table, in the top's
+    umbra, and the top's lower face), and each listed blocker's object, taken away, changes the exact form factor
+    of some floor point to the lamp (naive_skeleton.blockers_by_removal)."""
+    setup = lamp_table_scene()
+    listed = build_skeleton(setup.scene).blockers(setup.light, setup.floor)
+    assert set(setup.blockers.tolist()) <= set(listed.tolist())
+    assert not set(setup.not_blockers.tolist()) & set(listed.tolist())
+    evidence = blockers_by_removal(
+        setup.scene, setup.light, setup.floor, listed, samples=400, rng=np.random.default_rng(3), remove="object"
+    )
+    unchanged = [polygon for polygon, found in evidence.items() if not found.changed]
+    assert unchanged == [], f"listed, but taking their objects away changes nothing: {unchanged}"
 
 
 # ----------------------------------------------------------------------------------------------------------
