@@ -23,7 +23,13 @@ from core.skeleton import skeleton as skeleton_module
 from core.skeleton.validation import ARC_EV, END_FREE, END_TERMINAL, GEN_NONE, GEN_VERTEX
 from core.visibility import exact_form_factors
 from tests.core.furnished_rooms import box_quads, furnished_room
-from tests.core.naive_skeleton import blockers_by_removal, swath_line
+from tests.core.naive_skeleton import (
+    analytic_event_segments,
+    blockers_by_removal,
+    face_plane_traces,
+    swath_line,
+    uncovered,
+)
 from tests.core.skeleton_scenes import box_over_floor_scene, boxes_in_room, generic_closed_room, lamp_table_scene
 
 EXACT = 1e-9
@@ -754,6 +760,21 @@ def test_blockers_of_the_lamp_and_the_floor_are_exact():
     )
     unchanged = [polygon for polygon, found in evidence.items() if not found.changed]
     assert unchanged == [], f"listed, but taking their objects away changes nothing: {unchanged}"
+
+
+def test_discontinuities_of_a_box_over_a_floor_are_the_analytic_events():
+    """Issue 3: discontinuities(light, floor) with one box between them cover every EV / VE event line derived
+    from the geometry alone (naive_skeleton.analytic_event_segments) and nothing else but pieces of the traces
+    of the box faces' planes cutting the light (face_plane_traces: the form factor's derivative jumps there
+    too), however the skeleton splits them at nodes."""
+    setup = box_over_floor_scene()
+    scene = setup.scene
+    ours = build_skeleton(scene).discontinuities(setup.light, setup.floor)
+    events = analytic_event_segments(*setup.event_geometry())
+    tol = 1e-7 * scene.diagonal
+    assert len(events) > 0
+    assert len(uncovered(events, ours, tol)) == 0
+    assert len(uncovered(ours, np.concatenate([events, face_plane_traces(*setup.event_geometry())]), tol)) == 0
 
 
 # ----------------------------------------------------------------------------------------------------------
