@@ -149,6 +149,7 @@ class Skeleton:
         n_nodes = self._n_nodes
         rejected = np.zeros_like(self.rejected)
         element_solid = element_solids(self.scene, self.topology)
+        edge_tol = _edge_tolerance(self.scene)
         for candidates, fraction in iter_candidates(
             self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
             cancel=cancel,
@@ -161,6 +162,7 @@ class Skeleton:
                 self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid
             )
             rejected += counters
+            nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)
             node_parts.append(nodes)
             incidence_parts.append(
                 IncidenceChunk(
@@ -238,6 +240,7 @@ class Skeleton:
         self._vertex_offsets[1:] = np.cumsum(np.bincount(ev_vertex, minlength=n_vertices))
         # the indexes below are the largest arrays of a build: what each step leaves goes before the next
         del ev, ev_vertex, order
+        _return_free_memory()
         self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs = _pair_index(
             arcs.kind, arcs.codes, arcs.ends, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
             scene.edge_face_offsets, scene.edge_faces, topo.face_group, topo.n_groups, WORKERS,
@@ -495,27 +498,28 @@ class Skeleton:
         piece_s, piece_node = _piece_bounds(offsets, cut_offsets, cut_s, cut_node, arcs.s, arcs.node)
         del cut_offsets, cut_s, cut_node
         arc = _arc_of_pieces(offsets)
-        vertex = arcs.codes[arc, 0].astype(np.int64)
-        edge = (arcs.codes[arc, 1] - nv).astype(np.int64)
-        del arc
-        apex = scene.vertices[vertex]
-        seen = np.full((len(vertex), 2), -1, dtype=np.int32)
-        for column, side in enumerate((1.0, -1.0)):
-            if len(vertex) == 0:
-                break
-            directions = _probe_directions(
-                vertex, edge, piece_s, scene.vertices, scene.edges, side * _PROBE_LENGTHS * scene.tol.length
-            )
-            free = _lines_leave_freely(
-                vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
-                topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
-                self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
-                scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
-            )  # fmt: skip
-            polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
-            del directions
-            hit = free & (polygon >= 0)
-            seen[hit, column] = topo.face_group[polygon[hit]]
+        seen = np.full((len(arc), 2), -1, dtype=np.int32)
+        # the rays of all pieces at once would set the peak memory of a build
+        for lo in range(0, len(arc), _PROBED_AT_ONCE):
+            _return_free_memory()
+            hi = min(lo + _PROBED_AT_ONCE, len(arc))
+            vertex = arcs.codes[arc[lo:hi], 0].astype(np.int64)
+            edge = (arcs.codes[arc[lo:hi], 1] - nv).astype(np.int64)
+            apex = scene.vertices[vertex]
+            for column, side in enumerate((1.0, -1.0)):
+                directions = _probe_directions(
+                    vertex, edge, piece_s[lo:hi], scene.vertices, scene.edges,
+                    side * _PROBE_LENGTHS * scene.tol.length,
+                )  # fmt: skip
+                free = _lines_leave_freely(
+                    vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
+                    topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
+                    self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
+                    scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
+                )  # fmt: skip
+                polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
+                hit = np.flatnonzero(free & (polygon >= 0))
+                seen[lo + hit, column] = topo.face_group[polygon[hit]]
         return Probes(offsets, piece_s, piece_node, seen)
 
     def _faces_along(self, edge: int, s: float) -> list[tuple[int, int]]:
@@ -619,21 +623,33 @@ _EMPTY = {
 
 
 def _concatenated(chunk_type, parts: list):
-    """One chunk_type (NodeChunk or IncidenceChunk) holding the rows of `parts` in order. Empties `parts` and
-    lets each column's pieces go once they are joined: all the pieces and all the joined columns at once would
-    double the memory of a build."""
+    """One chunk_type (NodeChunk, IncidenceChunk or Arcs) holding the rows of `parts` in order. Empties `parts`
+    and lets each piece go once copied: the joined columns are allocated first but their pages are taken only
+    as the rows arrive, so the peak is the rows plus one piece, not all the pieces and all the joined rows."""
     if not parts:
         return _EMPTY[chunk_type]()
     if len(parts) == 1:
         return parts.pop()
-    columns = {field.name: [getattr(part, field.name) for part in parts] for field in fields(chunk_type)}
-    parts.clear()
+    names = [field.name for field in fields(chunk_type)]
     joined = {}
-    for name in list(columns):
-        joined[name] = np.concatenate(columns.pop(name))
+    for name in names:
+        columns = [getattr(part, name) for part in parts]
+        joined[name] = np.empty((sum(len(c) for c in columns), *columns[0].shape[1:]), np.result_type(*columns))
+    del columns
+    parts.reverse()
+    row = 0
+    while parts:
+        part = parts.pop()
+        for name in names:
+            joined[name][row : row + len(part)] = getattr(part, name)
+        row += len(part)
+        del part
         _return_free_memory()
     return chunk_type(**joined)
 
+
+#: probed pieces whose rays are cast at a time (see Skeleton._probe_arcs)
+_PROBED_AT_ONCE = 1 << 16
 
 #: incidences assembled into arcs at a time (see _arcs_by_key_range)
 _ASSEMBLED_AT_ONCE = 1 << 20
@@ -643,8 +659,8 @@ def _arcs_by_key_range(parts: list, node_id, edge_tol, n_vertices: int, n_edges:
     """The arcs (core.skeleton.graph.assemble_arcs) of the incidences of `parts` (IncidenceChunk, their node
     ids mapped through node_id (N,) int32), assembled for one range of keys (kind, first generator) at a time:
     arcs are sorted by their key first, so the pieces joined in order are the arcs of all incidences at once.
-    When `release`, each piece's rows leave `parts` once assembled (emptied at the end): all incidences, their
-    sort and all arcs at once would set the peak memory of a build."""
+    When `release`, `parts` is emptied (see _pieces_by_key_range): all incidences, their sort and all arcs at
+    once would set the peak memory of a build."""
     n_codes = n_vertices + n_edges
     counts = np.zeros(len(ARC_NAMES) * n_codes, dtype=np.int64)
     for part in parts:
@@ -652,27 +668,48 @@ def _arcs_by_key_range(parts: list, node_id, edge_tol, n_vertices: int, n_edges:
     cumulative = np.concatenate([[0], np.cumsum(counts)])
     pieces = max(1, -(-int(cumulative[-1]) // _ASSEMBLED_AT_ONCE))
     bounds = np.unique(np.searchsorted(cumulative, np.linspace(0, cumulative[-1], pieces + 1)[1:-1]))
-    bounds = [0, *bounds.tolist(), len(counts)]
+    bounds = np.array([0, *bounds.tolist(), len(counts)], dtype=np.int64)
     arcs = []
-    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        taken = []
-        for i, part in enumerate(parts):
-            prefix = _key_prefix(part, n_codes)
-            inside = (prefix >= lo) & (prefix < hi)
-            del prefix
-            taken.append(IncidenceChunk(*(getattr(part, f.name)[inside] for f in fields(IncidenceChunk))))
-            if release:
-                parts[i] = IncidenceChunk(*(getattr(part, f.name)[~inside] for f in fields(IncidenceChunk)))
-            del part, inside
-        piece = _concatenated(IncidenceChunk, taken)
+    for piece in _pieces_by_key_range(parts, bounds, n_codes, release):
         arcs.append(assemble_arcs(
             piece.kind, piece.codes, piece.end, piece.s, piece.direction, node_id[piece.node], edge_tol, n_vertices,
         ))  # fmt: skip
         del piece
         _return_free_memory()
-    if release:
-        parts.clear()
     return _concatenated(Arcs, arcs)
+
+
+def _pieces_by_key_range(parts: list, bounds: np.ndarray, n_codes: int, release: bool):
+    """Yield, for each range [bounds[k], bounds[k + 1]) of key prefixes (see _key_prefix), the incidences of
+    `parts` (IncidenceChunk) in it as one IncidenceChunk, in the order of `parts` and of their rows. When
+    `release`, each part is split among the ranges in one pass and let go (`parts` ends empty): its rows are
+    then held once, in their range; otherwise each range's rows are copied out of the parts, which stay."""
+    names = [field.name for field in fields(IncidenceChunk)]
+    n_ranges = len(bounds) - 1
+    if not release:
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            taken = []
+            for part in parts:
+                prefix = _key_prefix(part, n_codes)
+                inside = (prefix >= lo) & (prefix < hi)
+                taken.append(IncidenceChunk(*(getattr(part, name)[inside] for name in names)))
+            yield _concatenated(IncidenceChunk, taken)
+        return
+    ranges: list[list[IncidenceChunk]] = [[] for _ in range(n_ranges)]
+    parts.reverse()
+    while parts:
+        part = parts.pop()
+        which = np.searchsorted(bounds, _key_prefix(part, n_codes), side="right") - 1
+        order = np.argsort(which, kind="stable")
+        cuts = np.searchsorted(which[order], np.arange(n_ranges + 1))
+        for k in range(n_ranges):
+            rows = order[cuts[k] : cuts[k + 1]]
+            if len(rows):
+                ranges[k].append(IncidenceChunk(*(getattr(part, name)[rows] for name in names)))
+        del part, which, order
+        _return_free_memory()
+    for pieces in ranges:
+        yield _concatenated(IncidenceChunk, pieces)
 
 
 def _key_prefix(part, n_codes: int) -> np.ndarray:
@@ -691,6 +728,32 @@ def _one_node_per_line(columns: dict, node_line: np.ndarray) -> tuple[NodeChunk,
         selected[name] = columns.pop(name)[kept]
         _return_free_memory()
     return NodeChunk(**selected), line_id[node_line]
+
+
+def _merged_within(scene: Scene, nodes: NodeChunk, incidences: IncidenceChunk, edge_tol: np.ndarray):
+    """(NodeChunk, IncidenceChunk): one validated chunk with one node per line among its nodes (see
+    _one_node_per_line) and the incidences moved onto those, leaving out an incidence that repeats one of its
+    node's (same arc, same direction, coordinates within edge_tol (E,) on the parameter edge, as
+    core.skeleton.graph.assemble_arcs would). A quarter of an office's nodes repeat a line of their own chunk:
+    held to the build's end, they and their incidences would set its peak memory."""
+    node_line = coincident_nodes(nodes.start, nodes.direction, scene.diagonal, scene.tol.length)
+    nodes, node_id = _one_node_per_line(dict(vars(nodes)), node_line)
+    node = node_id[incidences.node]
+    codes = incidences.codes
+    order = np.lexsort((incidences.s, incidences.direction, codes[:, 2], codes[:, 1], codes[:, 0],
+                        incidences.kind, node))  # fmt: skip
+    same = (node[order[1:]] == node[order[:-1]]) & (incidences.direction[order[1:]] == incidences.direction[order[:-1]])
+    same &= incidences.kind[order[1:]] == incidences.kind[order[:-1]]
+    same &= (codes[order[1:]] == codes[order[:-1]]).all(axis=1)
+    edge = np.where(codes >= scene.n_vertices, codes - scene.n_vertices, len(edge_tol)).min(axis=1)
+    step = incidences.s[order[1:]] - incidences.s[order[:-1]]
+    same &= step <= edge_tol[edge[order[1:]]]
+    kept = np.ones(len(node), dtype=bool)
+    kept[order[1:][same]] = False
+    return nodes, IncidenceChunk(
+        node[kept].astype(np.int32), incidences.kind[kept], codes[kept], incidences.end[kept], incidences.s[kept],
+        incidences.direction[kept],
+    )
 
 
 @njit(cache=True)

@@ -925,6 +925,42 @@ def test_arcs_assembled_by_key_range_are_those_assembled_at_once(name, monkeypat
     np.testing.assert_array_equal(pieces._pair_arcs, whole._pair_arcs)
 
 
+@pytest.mark.parametrize("name", ["furnished room 0", "lamp table"])
+def test_nodes_merged_within_each_chunk_give_the_skeleton_merged_at_the_end(name, monkeypatch):
+    """Merging a chunk's nodes on one line (and their repeated incidences) as it is validated, to keep the
+    build's memory down, gives the nodes and arcs of merging them all at the end only."""
+    from core.skeleton.validation import IncidenceChunk
+
+    merged = _skeleton(name)
+    unmerged_chunks = []
+
+    def unmerged(scene, nodes, incidences, edge_tol):
+        unmerged_chunks.append(len(nodes))
+        rest = (getattr(incidences, field) for field in ("kind", "codes", "end", "s", "direction"))
+        return nodes, IncidenceChunk(incidences.node.astype(np.int32), *rest)
+
+    monkeypatch.setattr(skeleton_module, "_merged_within", unmerged)
+    whole = build_skeleton(_scene(name))
+    assert sum(unmerged_chunks) > len(merged.nodes)
+    for field in ("kind", "gen_kind", "gen_id", "start", "direction", "end", "reach"):
+        np.testing.assert_array_equal(getattr(merged.nodes, field), getattr(whole.nodes, field), err_msg=field)
+    for field in ("kind", "codes", "node", "s", "ends"):
+        np.testing.assert_array_equal(getattr(merged.arcs, field), getattr(whole.arcs, field), err_msg=field)
+
+
+@pytest.mark.parametrize("name", ["furnished room 0", "lamp table"])
+def test_probes_cast_in_batches_are_those_cast_at_once(name, monkeypatch):
+    """The probed pieces' rays cast a hundred at a time see what they see cast all at once."""
+    whole = _skeleton(name)
+    assert len(whole._probes.s) > 3 * 100
+    monkeypatch.setattr(skeleton_module, "_PROBED_AT_ONCE", 100)
+    batched = build_skeleton(_scene(name))
+    for field in ("offsets", "s", "node", "seen"):
+        expected = getattr(whole._probes, field)
+        np.testing.assert_array_equal(getattr(batched._probes, field), expected, err_msg=field)
+    assert (whole._probes.seen >= 0).any()
+
+
 def test_incidences_sort_as_lexsort_does():
     """The incidences' order for pairing (kind, generators, then s; ties in index order) is np.lexsort's, with
     repeated and NaN coordinates, runs of one key longer and shorter than an insertion sort takes, and codes
