@@ -311,14 +311,83 @@ class Skeleton:
         return self._pair_arcs[self._pair_offsets[k] : self._pair_offsets[k + 1]].astype(np.int64)
 
     def interactions(self, polygon: int) -> np.ndarray:
-        """Sorted (K,) int64 polygons that `polygon` sees: some critical line joins them (section 4.4)."""
+        """Sorted (K,) int64 the polygons `polygon` sees (section 4.4), among those facing it (a vertex of each
+        strictly in front of the other's plane): joined to it by the line of an arc along a free segment from a
+        point of one to a point of the other, or seen from a vertex of it or seeing one of its vertices (the
+        exact vertex views: form_factor > 0, see _sees). On a lazy skeleton the polygons tried are built as
+        sources."""
         group = self._group(polygon, "polygon")
         self._require(polygon)
-        group = np.int32(group)
-        lo = np.searchsorted(self._pair_first, group, side="left")
-        hi = np.searchsorted(self._pair_first, group, side="right")
-        groups = np.union1d(self._pair_second[lo:hi], self._pair_first[self._pair_second == group]).astype(np.int64)
-        return _polygons_of_groups(self.topology, groups)
+        scene, tol = self.scene, self.scene.tol.length
+        offsets, ids = scene.polygon_offsets, scene.polygon_vertex_ids
+        in_front_of_polygon = scene.vertices[ids] @ scene.normals[polygon] + scene.plane_offsets[polygon] > tol
+        own = scene.polygon_vertices(polygon)
+        own_in_front = scene.vertices[own] @ scene.normals.T + scene.plane_offsets > tol
+        facing = np.logical_or.reduceat(in_front_of_polygon, offsets[:-1]) & own_in_front.any(axis=0)
+        facing &= self.topology.face_group != group
+        seen = facing & self._joined_freely(polygon, group)
+        # two surfaces seeing each other with no silhouette between (the walls of a room) share no arc
+        for other in np.flatnonzero(facing & ~seen).tolist():
+            corners = slice(offsets[other], offsets[other + 1])
+            theirs = ids[corners][in_front_of_polygon[corners]]
+            seen[other] = any(self._sees(v, polygon, other) for v in theirs.tolist()) or any(
+                self._sees(v, other, polygon) for v in own[own_in_front[:, other]].tolist()
+            )
+        return np.flatnonzero(seen).astype(np.int64)
+
+    def _sees(self, vertex: int, source: int, receiver: int) -> bool:
+        """Whether the points of `receiver` near its corner `vertex` see `source`, read from the vertex's view.
+        A vertex resting on another object's face (see _resting_on) sees into that object through the face's
+        plane, as a point of contact does in the exact form factors: only sources wholly in front of those
+        planes are read from it (a leg's top corner under a table top sees the room through the top). A vertex
+        at another object's vertex or edge (see _elements_at) is not read: where the receiver lies flush on
+        that object, its corner sees through it along the contact (a box stacked flush on another). Nor is a
+        view that does not close (the corner of a rug lying on the floor)."""
+        if self._other_offsets[vertex + 1] > self._other_offsets[vertex]:
+            return False
+        rests = self._rest_faces[self._rest_offsets[vertex] : self._rest_offsets[vertex + 1]]
+        heights = self.scene.polygon(source) @ self.scene.normals[rests].T + self.scene.plane_offsets[rests]
+        if not (heights >= -self.scene.tol.length).all():
+            return False
+        try:
+            return self.form_factor(vertex, source, receiver) > 0.0
+        except VisradError:
+            return False
+
+    def _joined_freely(self, polygon: int, group: int) -> np.ndarray:
+        """(P,) bool: the polygons the line of an arc joining their surface and `polygon`'s (`group`) runs to,
+        at the arc's middle, from a point of `polygon` to a point of theirs, leaving the front of one and
+        reaching the front of the other. The lines of an arc are free between the surfaces it joins."""
+        scene = self.scene
+        joined = np.zeros(scene.n_polygons, dtype=bool)
+        rows = np.flatnonzero((self._pair_first == group) | (self._pair_second == group))
+        counts = self._pair_offsets[rows + 1] - self._pair_offsets[rows]
+        if counts.sum() == 0:
+            return joined
+        first = np.repeat(self._pair_offsets[rows] - np.cumsum(counts) + counts, counts)
+        arcs = self._pair_arcs[first + np.arange(counts.sum())].astype(np.int64)
+        others = np.repeat(np.where(self._pair_first[rows] == group, self._pair_second[rows], self._pair_first[rows]),
+                           counts)  # fmt: skip
+        middle = self.arcs.s[arcs].mean(axis=1)
+        # lines lying in a face's plane slide along it: onto the corner of a face pressed flush against another,
+        # they join it edge-on only
+        known = np.isfinite(middle) & ~(self.arcs.ends[arcs] == END_PLANAR).any(axis=(1, 2))
+        arcs, others, middle = arcs[known], others[known], middle[known]
+        origin, direction = _arc_lines(self.arcs.kind, self.arcs.codes, arcs, middle, scene.vertices, scene.edges,
+                                       scene.n_vertices)  # fmt: skip
+        at_polygon = _line_meets_polygon(scene, polygon, origin, direction)
+        normal = scene.normals[polygon]
+        for other_group in np.unique(others).tolist():
+            lines = np.flatnonzero((others == other_group) & np.isfinite(at_polygon))
+            for other in self.topology.polygons_of_group(other_group).tolist():
+                at_other = _line_meets_polygon(scene, other, origin[lines], direction[lines])
+                towards = (at_other - at_polygon[lines])[:, None] * direction[lines]
+                joined[other] = np.any(
+                    (np.abs(at_other - at_polygon[lines]) * np.linalg.norm(direction[lines], axis=1)
+                     > scene.tol.length)
+                    & (towards @ normal > 0.0) & (towards @ scene.normals[other] < 0.0)
+                )  # fmt: skip
+        return joined
 
     def blockers(self, source: int, receiver: int) -> np.ndarray:
         """Sorted (K,) int64 exact blocker list of the pair (section 4.4): the polygons around the generators
@@ -864,10 +933,34 @@ def _element_faces(scene: Scene, topology, code: int) -> np.ndarray:
     return scene.edge_faces[scene.edge_face_offsets[edge] : scene.edge_face_offsets[edge + 1]]
 
 
-def _polygons_of_groups(topology, groups: np.ndarray) -> np.ndarray:
-    if len(groups) == 0:
-        return np.empty(0, dtype=np.int64)
-    return np.sort(np.concatenate([topology.polygons_of_group(int(g)) for g in groups]))
+@njit(cache=True)
+def _arc_lines(kind, codes, arcs, s, vertices, edges, n_vertices):
+    """(K, 3) points and (K, 3) directions of the lines of `arcs` (K,) int64 (kind, codes: of Arcs) at their
+    parameters s (K,) float64 (see _arc_line_at)."""
+    origin = np.empty((arcs.shape[0], 3))
+    direction = np.empty((arcs.shape[0], 3))
+    for k in range(arcs.shape[0]):
+        point, along = _arc_line_at(kind[arcs[k]], codes[arcs[k]], s[k], vertices, edges, n_vertices)
+        for i in range(3):
+            origin[k, i] = point[i]
+            direction[k, i] = along[i]
+    return origin, direction
+
+
+def _line_meets_polygon(scene: Scene, polygon: int, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """(K,) float64 the parameter t where each line origin + t direction ((K, 3) each) meets convex `polygon`
+    (its sides included, within the tolerance length), NaN where it does not or runs along its plane."""
+    normal, offset = scene.normals[polygon], scene.plane_offsets[polygon]
+    rate = direction @ normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -(origin @ normal + offset) / rate
+        t[np.abs(rate) <= scene.tol.cosine * np.linalg.norm(direction, axis=1)] = np.nan
+    point = origin + t[:, None] * direction
+    corners = scene.polygon(polygon)
+    for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
+        side = np.cross(b - a, point - a) @ normal / np.linalg.norm(b - a)
+        t[~(side >= -scene.tol.length)] = np.nan
+    return t
 
 
 def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, n_groups, workers):

@@ -9,9 +9,10 @@
   factor source -> receiver (evidence from core.visibility.exact_form_factors, verified on its own).
 * `reaches`: whether some unoccluded segment from the source to the receiver touches a polygon, settled either
   way where possible: a witness segment, or an occluder that every such segment crosses.
+* `seen_pairs`: which polygons see each other, from exact form factors at sample points of every polygon.
 
 Plain numpy, every polygon tested, no BVH. The only core function used is exact_form_factors (by
-`blockers_by_removal`); nothing here imports core.skeleton or core.raycast.
+`blockers_by_removal` and `seen_pairs`); nothing here imports core.skeleton or core.raycast.
 """
 
 from __future__ import annotations
@@ -713,3 +714,46 @@ def swath_line(vertices: np.ndarray, edges: np.ndarray, codes, s: float) -> tupl
         planes = [np.cross(vertices[edges[e, 0]] - point, vertices[edges[e, 1]] - point) for e in edge_ids[1:]]
         direction = np.cross(planes[0], planes[1])
     return point, direction / np.linalg.norm(direction)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Which polygons see each other?
+
+
+def seen_pairs(scene, samples: int, rng, threshold: float = 1e-12) -> np.ndarray:
+    """(P, P) bool, symmetric: polygons p and q see each other when, from some sample point of either (its
+    corners and `samples` uniform points of it, all moved off it by 1e-5 of the scene's diagonal, the corners
+    towards its centre as well), the exact form factor to the other exceeds `threshold`, counting only points
+    strictly in front of the other's plane. Points covered by a polygon pressed against theirs (in its plane,
+    facing the other way: a box resting on a table) are left out: a point of contact sees through the contact
+    plane in the exact form factors. Evidence at the samples only: visibility through a sliver can be missed."""
+    shift = 1e-5 * scene.diagonal
+    seen = np.zeros((scene.n_polygons, scene.n_polygons), dtype=bool)
+    for p in range(scene.n_polygons):
+        corners = scene.polygon(p)
+        inward = corners.mean(axis=0) - corners
+        corners = corners + shift * inward / np.linalg.norm(inward, axis=1)[:, None]
+        points = np.concatenate([corners, receiver_samples(scene, p, samples, rng)])
+        points = points[~_pressed(scene, p, points)] + shift * scene.normals[p]
+        normals = np.tile(scene.normals[p], (len(points), 1))
+        for q in range(scene.n_polygons):
+            front = points @ scene.normals[q] + scene.plane_offsets[q] > 0.0
+            if q != p and front.any():
+                seen[p, q] = exact_form_factors(scene, points[front], normals[front], q).max() > threshold
+    return seen | seen.T
+
+
+def _pressed(scene, polygon: int, points: np.ndarray) -> np.ndarray:
+    """(K,) bool: the points of `polygon` inside (edges included) another polygon lying in its plane and
+    facing the other way."""
+    tol = RELATIVE_TOLERANCE * scene.diagonal
+    pressed = np.zeros(len(points), dtype=bool)
+    for other in range(scene.n_polygons):
+        if other == polygon or scene.normals[other] @ scene.normals[polygon] > -1.0 + 1e-9:
+            continue
+        inside = np.abs(points @ scene.normals[other] + scene.plane_offsets[other]) <= 100.0 * tol
+        corners = scene.polygon(other)
+        for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
+            inside &= np.cross(b - a, points - a) @ scene.normals[other] >= -tol
+        pressed |= inside
+    return pressed

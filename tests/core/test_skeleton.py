@@ -27,6 +27,7 @@ from tests.core.naive_skeleton import (
     analytic_event_segments,
     blockers_by_removal,
     face_plane_traces,
+    seen_pairs,
     swath_line,
     uncovered,
 )
@@ -117,6 +118,15 @@ SCENES = {
     "crossing seen from under the overhang": lambda: boxes_in_room(
         [((3.0, 1.9, 0.0), (4.0, 2.3, 1.25)), ((3.1, 1.8, 1.25), (3.8, 2.6, 1.7)), ((2.4, 1.7, 0.9), (2.9, 2.3, 1.7))],
         size=(5.2, 5.1, 3.4),
+    ),
+    # a wide, low box face and a narrow, tall one facing each other across the room through a small window (the
+    # slit between two slabs, then the slot between two more): their middles see each other, no corner of
+    # either sees the other (the lines from a corner through the window pass beside the other face)
+    "window between two faces": lambda: boxes_in_room(
+        [((0.6, 1.0, 1.4), (1.0, 3.0, 1.6)), ((4.0, 1.9, 0.5), (4.4, 2.1, 2.5)),
+         ((2.40, 0.2, 0.2), (2.45, 1.95, 2.8)), ((2.40, 2.05, 0.2), (2.45, 3.8, 2.8)),
+         ((2.55, 0.2, 0.2), (2.60, 3.8, 1.45)), ((2.55, 0.2, 1.55), (2.60, 3.8, 2.8))],
+        size=(5.0, 4.0, 3.0),
     ),
 }
 
@@ -760,6 +770,26 @@ def test_blockers_of_the_lamp_and_the_floor_are_exact():
     )
     unchanged = [polygon for polygon, found in evidence.items() if not found.changed]
     assert unchanged == [], f"listed, but taking their objects away changes nothing: {unchanged}"
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["generic room 0", "furnished room 0", "lamp table", "boxes stacked flush", "rug on floor",
+     "window between two faces"],
+)  # fmt: skip
+def test_interactions_are_the_polygons_seen(name):
+    """interactions(p) lists exactly the polygons p sees (DESIGN section 3), against exact form factors at 40
+    random points and the corners of every polygon (naive_skeleton.seen_pairs): the walls of a room (no arc
+    joins them), faces pressed against others (a table's leg tops, a box stacked flush on another: they see
+    nothing), a rug lying on the floor, two faces seeing each other through a window no corner of either
+    looks through."""
+    scene, skeleton = _scene(name), _skeleton(name)
+    seen = seen_pairs(scene, 40, np.random.default_rng(5))
+    assert seen.any() and not seen.all()
+    for polygon in range(scene.n_polygons):
+        listed = skeleton.interactions(polygon)
+        assert np.array_equal(listed, np.sort(listed))
+        np.testing.assert_array_equal(listed, np.flatnonzero(seen[polygon]), err_msg=f"polygon {polygon}")
 
 
 def test_discontinuities_of_a_box_over_a_floor_are_the_analytic_events():
