@@ -7,11 +7,13 @@ on a 195 MHz R10000, memory, thousands of nodes and arcs) with our speed-up. The
 against polygons (least squares on log-log; the paper: n^2.4), the lazy build from one source (the first light)
 against the full build on the largest size (paper, 1488 polygons: 4 min 15 s against 31 min 59 s), and on that
 skeleton the query costs: form_factor and visible_boundary per vertex view, discontinuities and blockers per
-(light, receiver) pair (paper: 1.2-1.5 ms per view, 1.3-28.6 ms per discontinuity mesh, 4 ms for a blocker list).
+(light, receiver) pair (paper: 1.2-1.5 ms per view, 1.3-28.6 ms per discontinuity mesh, 4 ms for a blocker list),
+interactions per polygon (the paper gives no time).
 Targets of issue 3: at least 30x faster than Table 1 at every size, at most 416 MB at 1488 polygons, the
 one-source lazy build at least 5x faster than the full build there.
 
-    python -m bench skeleton [--sizes 84,168,...] [--quick] [--views N] [--pairs N] [--seed S] [--progress]
+    python -m bench skeleton [--sizes 84,168,...] [--quick] [--views N] [--pairs N] [--interactions N] [--seed S]
+                             [--progress]
     python -m bench skeleton --furnished 200      # issue 3: generated rooms without exception, NaN, dangling arc
 """
 
@@ -183,8 +185,9 @@ def _mean_ms(call, arguments) -> tuple[float, float, int]:
     return 1e3 * float(np.mean(times)), 1e3 * float(np.max(times)), refused
 
 
-def query_costs(largest, views: int, pairs: int, seed: int) -> dict:
-    """Query times on the largest skeleton: vertex views of every light, (light, receiver) pairs."""
+def query_costs(largest, views: int, pairs: int, interactions: int, seed: int) -> dict:
+    """Query times on the largest skeleton: vertex views of every light, (light, receiver) pairs, the
+    interactions of `interactions` polygons (the lights first)."""
     n, scene, skeleton, _ = largest
     rng = np.random.default_rng(seed)
     lights = scene.lights
@@ -200,6 +203,8 @@ def query_costs(largest, views: int, pairs: int, seed: int) -> dict:
     receivers = np.flatnonzero(~is_light)
     sampled = rng.choice(receivers, size=min(pairs, len(receivers)), replace=False)
     pair_args = [(int(rng.choice(lights)), int(r)) for r in sampled]
+    others = rng.choice(receivers, size=min(max(0, interactions - len(lights)), len(receivers)), replace=False)
+    interaction_args = [(int(p),) for p in [*lights[:interactions], *others]]
     # the first calls may build per-skeleton indexes: warm them up outside the timings
     _mean_ms(skeleton.form_factor, view_args[:1])
     _mean_ms(skeleton.visible_boundary, [view_args[0][:2]])
@@ -210,6 +215,8 @@ def query_costs(largest, views: int, pairs: int, seed: int) -> dict:
     discontinuities = _mean_ms(skeleton.discontinuities, pair_args)
     blockers = _mean_ms(skeleton.blockers, pair_args)
     segments = [len(skeleton.discontinuities(*a)) for a in pair_args]
+    interacting = _mean_ms(skeleton.interactions, interaction_args)
+    listed = [len(skeleton.interactions(*a)) for a in interaction_args]
     return {
         "polygons": scene.n_polygons,
         "views": len(view_args),
@@ -225,6 +232,10 @@ def query_costs(largest, views: int, pairs: int, seed: int) -> dict:
         "discontinuity_segments_mean": float(np.mean(segments)),
         "blockers_ms": blockers[0],
         "blockers_max_ms": blockers[1],
+        "interaction_polygons": len(interaction_args),
+        "interactions_ms": interacting[0],
+        "interactions_max_ms": interacting[1],
+        "interactions_listed_mean": float(np.mean(listed)) if listed else float("nan"),
         "paper_view_ms": "1.2-1.5",
         "paper_discontinuities_ms": "1.3-28.6",
         "paper_blockers_ms": 4.0,
@@ -287,6 +298,8 @@ def main(argv) -> int:
     parser.add_argument("--quick", action="store_true", help="only the first three sizes (84, 168, 312)")
     parser.add_argument("--views", type=int, default=500, help="vertex views timed on the largest size")
     parser.add_argument("--pairs", type=int, default=200, help="(light, receiver) pairs timed on the largest size")
+    parser.add_argument("--interactions", type=int, default=10,
+                        help="polygons whose interactions are timed on the largest size (the lights first)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--progress", action="store_true", help="print build progress to stderr")
     parser.add_argument("--furnished", type=int, default=0, metavar="N",
@@ -338,11 +351,13 @@ def main(argv) -> int:
     print_table([lazy], ["polygons", "source", "lazy_seconds", "full_seconds", "speed_up", "lazy_nodes_total",
                          "lazy_peak_mb", "lazy_peak_above_baseline_mb", "paper_lazy_seconds", "paper_full_seconds"],
                 title="Lazy construction from one source (the first light) against the full build")
-    queries = query_costs(largest, args.views, args.pairs, args.seed)
+    queries = query_costs(largest, args.views, args.pairs, args.interactions, args.seed)
     print()
     print_table([queries], ["polygons", "views", "form_factor_ms", "form_factor_refused", "visible_boundary_ms",
                             "pairs", "discontinuities_ms", "discontinuities_max_ms", "discontinuity_segments_mean",
-                            "blockers_ms", "paper_view_ms", "paper_discontinuities_ms", "paper_blockers_ms"],
+                            "blockers_ms", "interaction_polygons", "interactions_ms", "interactions_max_ms",
+                            "interactions_listed_mean", "paper_view_ms", "paper_discontinuities_ms",
+                            "paper_blockers_ms"],
                 title="Query costs on the largest skeleton")
 
     targets = {
