@@ -342,7 +342,7 @@ class Skeleton:
         planes are read from it (a leg's top corner under a table top sees the room through the top). A vertex
         at another object's vertex or edge (see _elements_at) is not read: where the receiver lies flush on
         that object, its corner sees through it along the contact (a box stacked flush on another). Nor is a
-        view that does not close (the corner of a rug lying on the floor)."""
+        view form_factor refuses (one that does not close: none known)."""
         if self._other_offsets[vertex + 1] > self._other_offsets[vertex]:
             return False
         rests = self._rest_faces[self._rest_offsets[vertex] : self._rest_offsets[vertex + 1]]
@@ -547,6 +547,11 @@ class Skeleton:
                     segments.append((n0, n1, p0, p1))
                 else:
                     segments.append((n1, n0, p1, p0))
+        rests = self._rest_faces[self._rest_offsets[vertex] : self._rest_offsets[vertex + 1]]
+        if len(rests):
+            segments += _along_rest_planes(
+                segments, scene.normals[rests], scene.plane_offsets[rests], 16.0 * scene.tol.length
+            )
         return _chain(segments, vertex, source)
 
     def _probe_arcs(self) -> Probes:
@@ -1882,6 +1887,37 @@ def _collinear_edges(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     offsets = np.zeros(n_edges + 1, dtype=np.int64)
     offsets[1:] = np.cumsum(np.bincount(pairs[:, 0], minlength=n_edges))
     return offsets, pairs[:, 1]
+
+
+def _along_rest_planes(segments, normals: np.ndarray, offsets: np.ndarray, tol: float) -> list:
+    """The segments closing a view (oriented segments: from node, to node, from point, to point) along the
+    planes of the faces its vertex rests on (normals (R, 3), offsets (R,)): each chain ending at a point of such
+    a plane goes on to the nearest chain starting on it. The lines from the vertex sliding along the face it
+    rests on and past its edges (a rug's corner on the floor, towards the foot of a wall) bound the view where
+    that plane cuts the source, and no arc holds them: their far generator is the concave edge between the
+    face and the source (or what stands on the face before it)."""
+    arriving: dict[int, np.ndarray] = {}
+    leaving: dict[int, np.ndarray] = {}
+    for n0, n1, p0, p1 in segments:
+        leaving[n0] = p0
+        arriving[n1] = p1
+    ends = [(node, point) for node, point in arriving.items() if node not in leaving]
+    starts = [(node, point) for node, point in leaving.items() if node not in arriving]
+    closing = []
+    for node, point in ends:
+        on = np.abs(normals @ point + offsets) <= tol
+        if not on.any():
+            continue
+        candidates = [
+            (float(np.linalg.norm(other - point)), other_node, other)
+            for other_node, other in starts
+            if (np.abs(normals[on] @ other + offsets[on]) <= tol).any()
+        ]
+        if candidates:
+            _, other_node, other = min(candidates, key=lambda c: c[0])
+            starts = [(n, p) for n, p in starts if n != other_node]
+            closing.append((node, other_node, point, other))
+    return closing
 
 
 def _chain(segments, vertex: int, source: int) -> list[np.ndarray]:
