@@ -211,8 +211,10 @@ def _exact_from_the_free_side(scene: Scene, vertices: np.ndarray, receivers: np.
     """(Q,) exact_form_factors at the vertices, taken at vertices resting on another object in the limit from
     the free side. The oracle clips blockers against the point's own position: at a box corner on a table top
     it sees through the table (its top face is edge-on, its other faces turned away). The limit is
-    extrapolated (Richardson) from two points moved off by h and 2h along the receiver's normal plus the
-    normals of the faces the vertex rests on: error O(h^2). Sources whose plane holds the vertex stay at the
+    extrapolated (Richardson) from two points moved off by h and 2h into the receiver (towards its centre)
+    and along its normal: error O(h^2). Moving along the normals of the faces the vertex rests on instead can
+    land in another contact plane (a box's top corner on the edge of the box beside it and under a third
+    one's overhang: furnished room 10, vertex 14). Sources whose plane holds the vertex stay at the
     convention of both (edge-on: 0)."""
     points = scene.vertices[vertices]
     normals = scene.normals[receivers]
@@ -223,7 +225,8 @@ def _exact_from_the_free_side(scene: Scene, vertices: np.ndarray, receivers: np.
     if not moved.any():
         return exact
     rests = [sum((scene.normals[p] for p in resting[v]), np.zeros(3)) for v in vertices[moved]]
-    away = normals[moved] + np.array(rests)
+    inward = np.array([scene.polygon(int(r)).mean(axis=0) for r in receivers[moved]]) - points[moved]
+    away = normals[moved] + np.array(rests) + inward / np.linalg.norm(inward, axis=1)[:, None]
     away /= np.linalg.norm(away, axis=1)[:, None]
     h = 1e-7 * scene.diagonal
     near = exact_form_factors(scene, points[moved] + h * away, normals[moved], source)
