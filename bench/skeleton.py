@@ -14,7 +14,8 @@ one-source lazy build at least 5x faster than the full build there.
 
     python -m bench skeleton [--sizes 84,168,...] [--quick] [--views N] [--pairs N] [--interactions N] [--seed S]
                              [--progress]
-    python -m bench skeleton --furnished 200      # issue 3: generated rooms without exception, NaN, dangling arc
+    python -m bench skeleton --furnished 200      # issue 3: generated rooms without exception, NaN, dangling arc,
+                                                  # their vertex views closed and summing to 1
 """
 
 import argparse
@@ -244,19 +245,22 @@ def query_costs(largest, views: int, pairs: int, interactions: int, seed: int) -
 
 def furnished_rooms(build_skeleton, count: int) -> dict:
     """Build the first `count` generated furnished rooms (tests/core/furnished_rooms.py: boxes resting,
-    stacked, floating, side by side, against a wall); issue 3 asks for 200 without exception, NaN or dangling
-    arc. Returns the tallies and the rooms with dangling arcs."""
+    stacked, floating, side by side, against a wall) and query every vertex's view of every polygon in each;
+    issue 3 asks for 200 without exception, NaN or dangling arc, and for vertex form factors summing to 1.
+    Returns the tallies and the rooms with dangling arcs or refused views."""
     from core.scene import Scene
     from tests.core.furnished_rooms import furnished_room
 
-    failed, with_nan, dangling = {}, [], {}
-    seconds = []
+    failed, with_nan, dangling, refused = {}, [], {}, {}
+    seconds, query_seconds = [], []
+    queries, worst_sum = 0, 0.0
     for seed in range(count):
         vertices, polygons, _, _ = furnished_room(seed)
         n = len(polygons)
         start = time.perf_counter()
         try:
-            skeleton = build_skeleton(Scene.from_polygons(vertices, polygons, np.full((n, 3), 0.5), np.zeros((n, 3))))
+            scene = Scene.from_polygons(vertices, polygons, np.full((n, 3), 0.5), np.zeros((n, 3)))
+            skeleton = build_skeleton(scene)
         except Exception as error:  # noqa: BLE001 -- every failure is what this check counts
             failed[seed] = f"{type(error).__name__}: {error}"
             continue
@@ -267,6 +271,13 @@ def furnished_rooms(build_skeleton, count: int) -> dict:
             with_nan.append(seed)
         if skeleton.stats["dangling_arcs"]:
             dangling[seed] = skeleton.stats["dangling_arcs"]
+        start = time.perf_counter()
+        asked, not_closed, off_one = _views_in_room(scene, skeleton)
+        query_seconds.append(time.perf_counter() - start)
+        queries += asked
+        worst_sum = max(worst_sum, off_one)
+        if not_closed:
+            refused[seed] = not_closed
     return {
         "rooms": count,
         "exceptions": len(failed),
@@ -275,9 +286,44 @@ def furnished_rooms(build_skeleton, count: int) -> dict:
         "dangling_arcs_total": int(sum(dangling.values())),
         "seconds_mean": float(np.mean(seconds)) if seconds else float("nan"),
         "seconds_total": float(np.sum(seconds)),
+        "view_queries": queries,
+        "rooms_with_refused_views": len(refused),
+        "refused_views_total": int(sum(refused.values())),
+        "sum_to_one_worst": worst_sum,
+        "query_ms_mean": 1e3 * float(np.sum(query_seconds)) / max(queries, 1),
         "failed": failed,
         "dangling": dangling,
+        "refused": refused,
     }
+
+
+def _views_in_room(scene, skeleton) -> tuple[int, int, float]:
+    """(queries, refused, worst |sum - 1|): every vertex's view of every polygon, with one polygon using the
+    vertex as receiver (whether a view closes does not depend on the receiver), and at the free convex corners
+    (tests/core/skeleton_scenes.free_convex_corners) the form factors to all polygons summed, with each face
+    of the corner as receiver (DESIGN.md section 5.2)."""
+    from core.errors import VisradError
+    from tests.core.skeleton_scenes import free_convex_corners
+
+    faces_at = [[] for _ in range(scene.n_vertices)]
+    for polygon in range(scene.n_polygons):
+        for vertex in scene.polygon_vertices(polygon):
+            faces_at[int(vertex)].append(polygon)
+    free = free_convex_corners(scene)
+    queries, refused, worst = 0, 0, 0.0
+    for vertex, faces in enumerate(faces_at):
+        for receiver in faces if free[vertex] else faces[:1]:
+            total = 0.0
+            for source in range(scene.n_polygons):
+                queries += 1
+                try:
+                    total += skeleton.form_factor(vertex, source, receiver)
+                except VisradError:
+                    refused += 1
+                    total = np.nan
+            if free[vertex] and np.isfinite(total):
+                worst = max(worst, abs(total - 1.0))
+    return queries, refused, worst
 
 
 def _parse_sizes(text: str) -> list[int]:
@@ -303,7 +349,8 @@ def main(argv) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--progress", action="store_true", help="print build progress to stderr")
     parser.add_argument("--furnished", type=int, default=0, metavar="N",
-                        help="instead: build N generated furnished rooms, count exceptions, NaN, dangling arcs")
+                        help="instead: build N generated furnished rooms, count exceptions, NaN, dangling arcs, "
+                             "refused vertex views, and the worst sum of form factors off 1")
     args = parser.parse_args(argv)
     sizes = list(OFFICE_SIZES[:3]) if args.quick else args.sizes
 
@@ -319,6 +366,10 @@ def main(argv) -> int:
         print_table([report], ["rooms", "exceptions", "with_nan", "rooms_with_dangling_arcs", "dangling_arcs_total",
                                "seconds_mean", "seconds_total"],
                     title="Generated furnished rooms (touching, stacked, coplanar boxes)")
+        print()
+        print_table([report], ["view_queries", "rooms_with_refused_views", "refused_views_total", "sum_to_one_worst",
+                               "query_ms_mean"],
+                    title="Their vertex views (every vertex x every polygon; sums at free convex corners)")
         for seed, message in report["failed"].items():
             print(f"  room {seed}: {message}")
         write_results("skeleton-furnished", [report])

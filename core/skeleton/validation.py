@@ -1015,11 +1015,11 @@ def _relaxed_arc(
         last = max(last, r_group[j])
 
     # lines running between touching objects between the generators (see _sandwiched) are no arc
+    for k in range(n_sliding):
+        n = _row(normals, sl_poly[k])
+        in_plane[k] = abs(x[2] * _dot(n, f1) + x[3] * _dot(n, f2)) <= 1e-12 and \
+            abs(x[0] * _dot(n, f1) + x[1] * _dot(n, f2)) <= 1e-12  # fmt: skip
     if n_sliding >= 2:
-        for k in range(n_sliding):
-            n = _row(normals, sl_poly[k])
-            in_plane[k] = abs(x[2] * _dot(n, f1) + x[3] * _dot(n, f2)) <= 1e-12 and \
-                abs(x[0] * _dot(n, f1) + x[1] * _dot(n, f2)) <= 1e-12  # fmt: skip
         alpha = _combined(x[0], f1, x[1], f2)
         if _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u,
                        alpha, beta, g_tau[first], g_tau[last], diag, angle_tol, tol):  # fmt: skip
@@ -1294,6 +1294,9 @@ def _relaxed_arc(
         elif blocked:
             return n_inc
 
+    # where the lines end beyond either outer generator (infinite: they leave the scene)
+    reach_before = g_tau[first]
+    reach_after = g_tau[last]
     end_before = END_FREE
     if blocked_first or touch[0]:
         end_before = END_TERMINAL
@@ -1302,6 +1305,7 @@ def _relaxed_arc(
     elif touch_face[0] >= 0:
         end_before = face_group[touch_face[0]]
     else:
+        reach_before = -np.inf
         for g in range(first - 1, -1, -1):
             if g_tau[g] < before_tau:
                 break
@@ -1312,9 +1316,11 @@ def _relaxed_arc(
             )
             if poly >= 0:
                 end_before = face_group[poly]
+                reach_before = g_tau[g]
                 break
         if end_before == END_FREE and before_poly >= 0:
             end_before = face_group[before_poly]
+            reach_before = before_tau
     end_after = END_FREE
     if blocked_last or touch[1]:
         end_after = END_TERMINAL
@@ -1323,6 +1329,7 @@ def _relaxed_arc(
     elif touch_face[1] >= 0:
         end_after = face_group[touch_face[1]]
     else:
+        reach_after = np.inf
         for g in range(last + 1, n_groups):
             if g_tau[g] > after_tau:
                 break
@@ -1333,9 +1340,30 @@ def _relaxed_arc(
             )
             if poly >= 0:
                 end_after = face_group[poly]
+                reach_after = g_tau[g]
                 break
         if end_after == END_FREE and after_poly >= 0:
             end_after = face_group[after_poly]
+            reach_after = after_tau
+
+    # lines lying in the plane of a face they run along beyond an outer generator (the top of a box flush with
+    # the one the generator bounds, the bottom of a box standing over them, two such faces pressed together)
+    # have that face's solid on one side there, which the faces around the generators do not tell, and are
+    # stopped inside a contact, which no face crossing tells: what either side sees is read by probing, as for
+    # lines lying in a face's plane at the generators
+    for k in range(n_sliding):
+        if not in_plane[k]:
+            continue
+        incident = False
+        for j in range(n_retained):
+            if _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
+                incident = True
+        if incident:
+            continue
+        if min(sl_b[k], g_tau[first]) - max(sl_a[k], reach_before) > _CONTACT_LENGTHS * tol:
+            planar[0] = True
+        if min(sl_b[k], reach_after) - max(sl_a[k], g_tau[last]) > _CONTACT_LENGTHS * tol:
+            planar[1] = True
 
     if planar[0]:
         end_before = END_PLANAR

@@ -7,6 +7,8 @@
 * `box_over_floor_scene`: one box between a square light and a floor, for the analytic EV / VE event lines.
 * `generic_closed_room`: a closed room of floating boxes turned by random rotations: no contacts, no parallel
   edges across objects (generic position), for the graph-consistency tests before the degenerate rooms.
+* `free_convex_corners`: the vertices where the closed-room identity holds for every receiver (form factors
+  to all polygons sum to 1), for the tests and the furnished-room benchmark.
 
 Every scene is built through bench.scenes.SceneBuilder, so its conventions (objects with their own vertices,
 outward boxes, inward rooms, one-sided lights) are those of the benchmarks. Every polygon here is a convex
@@ -246,3 +248,34 @@ def boxes_in_room(boxes, size=(4.0, 3.0, 2.5)) -> Scene:
         polygons.extend([[base + i for i in q] for q in quads])
     count = len(polygons)
     return Scene.from_polygons(np.array(vertices), polygons, np.full((count, 3), 0.5), np.zeros((count, 3)))
+
+
+def free_convex_corners(scene: Scene) -> np.ndarray:
+    """(V,) bool: vertices of solid objects that touch no polygon of another object and whose edges are all
+    convex (every other face at the vertex lies behind each face), so every receiver's hemisphere there
+    looks into the room only. Room corners are not: half or three quarters of their hemisphere lie outside,
+    where the walls are seen edge-on."""
+    tol = 16.0 * scene.tol.length
+    result = np.zeros(scene.n_vertices, dtype=bool)
+    for vertex in range(scene.n_vertices):
+        point = scene.vertices[vertex]
+        own = [p for p in range(scene.n_polygons) if vertex in scene.polygon_vertices(p)]
+        if not all(scene.solid[p] for p in own):
+            continue
+        neighbours = np.unique(np.concatenate([scene.polygon_vertices(p) for p in own]))
+        if any(((scene.vertices[neighbours] - point) @ scene.normals[p] > tol).any() for p in own):
+            continue
+        result[vertex] = not any(touches(scene, p, point, tol) for p in range(scene.n_polygons) if p not in own)
+    return result
+
+
+def touches(scene: Scene, polygon: int, point: np.ndarray, tol: float) -> bool:
+    """Whether a point lies on a convex polygon (within tol of its plane and inside its sides)."""
+    normal = scene.normals[polygon]
+    if abs(normal @ point + scene.plane_offsets[polygon]) > tol:
+        return False
+    corners = scene.polygon(polygon)
+    sides = np.roll(corners, -1, axis=0) - corners
+    inward = np.cross(normal, sides)
+    inward /= np.linalg.norm(inward, axis=1)[:, None]
+    return bool((np.einsum("ij,ij->i", point - corners, inward) >= -tol).all())

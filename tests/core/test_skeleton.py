@@ -31,7 +31,14 @@ from tests.core.naive_skeleton import (
     swath_line,
     uncovered,
 )
-from tests.core.skeleton_scenes import box_over_floor_scene, boxes_in_room, generic_closed_room, lamp_table_scene
+from tests.core.skeleton_scenes import (
+    box_over_floor_scene,
+    boxes_in_room,
+    free_convex_corners,
+    generic_closed_room,
+    lamp_table_scene,
+    touches,
+)
 
 EXACT = 1e-9
 
@@ -64,6 +71,13 @@ SCENES = {
     # a box stacked across the corner of another by a thin strip: lines along the lower box's top edges are crossed
     # by the upper box's bottom edges
     "furnished room 10": lambda: _furnished(10),
+    # a box standing across two boxes of its height side by side: lines along their tops run under it, between
+    # the faces pressed together or just below its bottom
+    "furnished room 5": lambda: _furnished(5),
+    # views changing fast near a corner touching two boxes (the free-side limit needs a close extrapolation)
+    "furnished room 3": lambda: _furnished(3),
+    # stacks whose contact planes 45 vertex views used to run through
+    "furnished room 20": lambda: _furnished(20),
     # one axis-aligned box in an axis-aligned room: floating (a face diagonal aligned with a room edge: three
     # generators on one line), resting on the floor, against a wall
     "floating box": lambda: boxes_in_room([((1.0, 1.0, 0.5), (1.7, 1.6, 1.1))]),
@@ -137,7 +151,8 @@ BOX_ROOMS = ["floating box", "box on floor", "box on wall", "box in corner"]
 TOUCHING = ["box on box", "boxes stacked flush", "boxes side by side", "box pressed against a box on the wall",
             "box overhanging", "box overhanging a corner", "boxes pressed face to face", "lamp table",
             "furnished room 0", "box corner on another box's edge",
-            "crossing seen from under the overhang", "rug on floor"]  # fmt: skip
+            "crossing seen from under the overhang", "rug on floor", "furnished room 3", "furnished room 5",
+            "furnished room 10", "furnished room 20"]  # fmt: skip
 
 
 @cache
@@ -188,7 +203,7 @@ def _resting_on(scene: Scene) -> list[list[int]]:
             [
                 p
                 for p in range(scene.n_polygons)
-                if int(scene.object_ids[p]) not in own and _touches(scene, p, point, tol)
+                if int(scene.object_ids[p]) not in own and touches(scene, p, point, tol)
             ]
         )
     return result
@@ -207,32 +222,42 @@ def _hidden_by_contact(scene: Scene, vertices: np.ndarray, receivers: np.ndarray
     )
 
 
-def _exact_from_the_free_side(scene: Scene, vertices: np.ndarray, receivers: np.ndarray, source: int) -> np.ndarray:
-    """(Q,) exact_form_factors at the vertices, taken at vertices resting on another object in the limit from
-    the free side. The oracle clips blockers against the point's own position: at a box corner on a table top
-    it sees through the table (its top face is edge-on, its other faces turned away). The limit is
-    extrapolated (Richardson) from two points moved off by h and 2h into the receiver (towards its centre)
-    and along its normal: error O(h^2). Moving along the normals of the faces the vertex rests on instead can
-    land in another contact plane (a box's top corner on the edge of the box beside it and under a third
-    one's overhang: furnished room 10, vertex 14). Sources whose plane holds the vertex stay at the
-    convention of both (edge-on: 0)."""
+def _exact_from_the_free_side(
+    scene: Scene, vertices: np.ndarray, receivers: np.ndarray, source: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """((Q,) exact_form_factors at the vertices, (Q,) how uncertain they are), taken at vertices resting on
+    another object in the limit from the free side. The oracle clips blockers against the point's own
+    position: at a box corner on a table top it sees through the table (its top face is edge-on, its other
+    faces turned away). The limit is extrapolated (Richardson, error O(h^3)) from three points moved off by
+    h, 2h and 4h into the receiver (towards its centre) and along its normal, for h = 25, 50 and 100 tolerance
+    lengths: the median, uncertain by the spread of the three. No single h does: from h and 2h at 100 lengths
+    the error reached 7.7e-7 at a corner of furnished room 3, where the view changes fast; closer than about
+    40 lengths the oracle's own contact tolerance shows (1e-9 to 3e-9 at corners of the box on box and of
+    furnished rooms 5 and 10); farther, a sliver of a source seen from 200 lengths off but not closer (a
+    corner of furnished room 20) or a curvature (a corner of the box overhanging: 1.1e-9 at h = 40) spoil one
+    of the estimates; the others then agree within 1e-9. Moving along the normals of the faces the vertex
+    rests on instead can land in another contact plane (a box's top corner on the edge of the box beside it
+    and under a third one's overhang: furnished room 10, vertex 14). Sources whose plane holds the vertex
+    stay at the convention of both (edge-on: 0), exact."""
     points = scene.vertices[vertices]
     normals = scene.normals[receivers]
     exact = exact_form_factors(scene, points, normals, source)
+    uncertainty = np.zeros(len(vertices))
     resting = _resting_on(scene)
     moved = np.array([len(resting[v]) > 0 for v in vertices], dtype=bool)
     moved &= np.abs(points @ scene.normals[source] + scene.plane_offsets[source]) > scene.tol.length
     if not moved.any():
-        return exact
+        return exact, uncertainty
     rests = [sum((scene.normals[p] for p in resting[v]), np.zeros(3)) for v in vertices[moved]]
     inward = np.array([scene.polygon(int(r)).mean(axis=0) for r in receivers[moved]]) - points[moved]
     away = normals[moved] + np.array(rests) + inward / np.linalg.norm(inward, axis=1)[:, None]
     away /= np.linalg.norm(away, axis=1)[:, None]
-    h = 1e-7 * scene.diagonal
-    near = exact_form_factors(scene, points[moved] + h * away, normals[moved], source)
-    far = exact_form_factors(scene, points[moved] + 2.0 * h * away, normals[moved], source)
-    exact[moved] = 2.0 * near - far
-    return exact
+    offs = 25.0 * scene.tol.length * 2.0 ** np.arange(5)
+    moved_off = [exact_form_factors(scene, points[moved] + off * away, normals[moved], source) for off in offs]
+    estimates = np.array([(8.0 * moved_off[k] - 6.0 * moved_off[k + 1] + moved_off[k + 2]) / 3.0 for k in range(3)])
+    exact[moved] = np.median(estimates, axis=0)
+    uncertainty[moved] = np.ptp(estimates, axis=0)
+    return exact, uncertainty
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -418,20 +443,23 @@ def _strictly_inside(scene: Scene, face: int, point: np.ndarray, tol: float) -> 
     ],
 )
 def test_vertex_form_factors_are_exact(name):
-    """Every vertex query is answered and equals exact_form_factors. The views of the touching scenes run along
-    contact planes: faces pressed together along collinear overlapping edges (their faces close around each
-    other's edge), corners at another box's corner or on its edge (lines into the solid there enter that box),
-    lines sliding over a top under an overhang or over two coplanar tops, lines ending exactly on a room's
-    concave edge; the construction used to leave those views open and the query refused them."""
+    """Every vertex query is answered and equals exact_form_factors (at vertices resting on another object:
+    its free-side limit, within 1e-9 plus the spread of its estimates, itself bounded). The views of the
+    touching scenes run along contact planes: faces pressed together along collinear overlapping edges (their
+    faces close around each other's edge), corners at another box's corner or on its edge (lines into the
+    solid there enter that box), lines sliding over a top under an overhang or over two coplanar tops, lines
+    ending exactly on a room's concave edge, lines through the contact of a box standing on two others or
+    sliding under its bottom; the construction used to leave those views open and the query refused them."""
     scene = _scene(name)
     vertices, receivers, values = _skeleton_form_factors(name)
     assert np.isfinite(values).all()
     for source in range(scene.n_polygons):
-        exact = _exact_from_the_free_side(scene, vertices, receivers, source)
-        worst = int(np.argmax(np.abs(values[:, source] - exact)))
-        assert abs(values[worst, source] - exact[worst]) <= EXACT, (
+        exact, uncertainty = _exact_from_the_free_side(scene, vertices, receivers, source)
+        assert uncertainty.max() <= 1e-7, f"source {source}: the free-side limit is uncertain by {uncertainty.max()}"
+        worst = int(np.argmax(np.abs(values[:, source] - exact) - uncertainty))
+        assert abs(values[worst, source] - exact[worst]) <= EXACT + uncertainty[worst], (
             f"vertex {vertices[worst]}, receiver {receivers[worst]}, source {source}: "
-            f"skeleton {values[worst, source]!r}, exact {exact[worst]!r}"
+            f"skeleton {values[worst, source]!r}, exact {exact[worst]!r} (uncertain by {uncertainty[worst]:.1e})"
         )
 
 
@@ -462,49 +490,18 @@ def test_faces_seen_from_behind_are_hidden(name):
     assert checked > 1000
 
 
-def _free_convex_corners(scene: Scene) -> np.ndarray:
-    """(V,) bool: vertices of solid objects that touch no polygon of another object and whose edges are all
-    convex (every other face at the vertex lies behind each face), so every receiver's hemisphere there
-    looks into the room only. Room corners are not: half or three quarters of their hemisphere lie outside,
-    where the walls are seen edge-on."""
-    tol = 16.0 * scene.tol.length
-    result = np.zeros(scene.n_vertices, dtype=bool)
-    for vertex in range(scene.n_vertices):
-        point = scene.vertices[vertex]
-        own = [p for p in range(scene.n_polygons) if vertex in scene.polygon_vertices(p)]
-        if not all(scene.solid[p] for p in own):
-            continue
-        neighbours = np.unique(np.concatenate([scene.polygon_vertices(p) for p in own]))
-        if any(((scene.vertices[neighbours] - point) @ scene.normals[p] > tol).any() for p in own):
-            continue
-        result[vertex] = not any(_touches(scene, p, point, tol) for p in range(scene.n_polygons) if p not in own)
-    return result
-
-
-def _touches(scene: Scene, polygon: int, point: np.ndarray, tol: float) -> bool:
-    """Whether a point lies on a convex polygon (within tol of its plane and inside its sides)."""
-    normal = scene.normals[polygon]
-    if abs(normal @ point + scene.plane_offsets[polygon]) > tol:
-        return False
-    corners = scene.polygon(polygon)
-    sides = np.roll(corners, -1, axis=0) - corners
-    inward = np.cross(normal, sides)
-    inward /= np.linalg.norm(inward, axis=1)[:, None]
-    return bool((np.einsum("ij,ij->i", point - corners, inward) >= -tol).all())
-
-
 @pytest.mark.parametrize(
     "name",
     [
         "generic room 0", "generic room 1", "floating box", "boxes side by side", "box overhanging",
-        "box overhanging a corner", "furnished room 0",
+        "box overhanging a corner", "furnished room 0", "furnished room 5", "furnished room 10", "furnished room 20",
     ],
 )  # fmt: skip
 def test_vertex_form_factors_sum_to_one_in_closed_rooms(name):
     """Closed-room identity (DESIGN.md section 5.2), from the skeleton alone, at every convex corner of the
     furniture touching nothing, with each of its faces as receiver."""
     vertices, receivers, values = _skeleton_form_factors(name)
-    keep = _free_convex_corners(_scene(name))[vertices]
+    keep = free_convex_corners(_scene(name))[vertices]
     assert keep.sum() >= 8
     vertices, receivers, totals = vertices[keep], receivers[keep], values[keep].sum(axis=1)
     worst = int(np.argmax(np.abs(totals - 1.0)))
