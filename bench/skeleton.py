@@ -169,21 +169,25 @@ def lazy_against_full(build_skeleton, largest, show_progress: bool) -> dict:
     }
 
 
-def _mean_ms(call, arguments) -> tuple[float, float, int]:
-    """Mean and largest milliseconds of call(*a) over the argument tuples, and how many calls the skeleton
-    refused (VisradError: a view that does not close in a degenerate scene; timed all the same)."""
+def _mean_ms(call, arguments) -> tuple[float, float, int, list[int]]:
+    """Mean and largest milliseconds of call(*a) over the argument tuples, how many calls the skeleton refused
+    (VisradError: a view that does not close in a degenerate scene; timed all the same), and the length of
+    each answer (segments, polygons; -1 when refused or not a sequence)."""
     from core.errors import VisradError
 
     times = []
     refused = 0
+    lengths = []
     for a in arguments:
         start = time.perf_counter()
         try:
-            call(*a)
+            answer = call(*a)
         except VisradError:
             refused += 1
+            answer = None
         times.append(time.perf_counter() - start)
-    return 1e3 * float(np.mean(times)), 1e3 * float(np.max(times)), refused
+        lengths.append(len(answer) if hasattr(answer, "__len__") else -1)
+    return 1e3 * float(np.mean(times)), 1e3 * float(np.max(times)), refused, lengths
 
 
 def query_costs(largest, views: int, pairs: int, interactions: int, seed: int) -> dict:
@@ -215,9 +219,9 @@ def query_costs(largest, views: int, pairs: int, interactions: int, seed: int) -
     boundary = _mean_ms(skeleton.visible_boundary, [a[:2] for a in view_args])
     discontinuities = _mean_ms(skeleton.discontinuities, pair_args)
     blockers = _mean_ms(skeleton.blockers, pair_args)
-    segments = [len(skeleton.discontinuities(*a)) for a in pair_args]
+    segments = [k for k in discontinuities[3] if k >= 0]
     interacting = _mean_ms(skeleton.interactions, interaction_args)
-    listed = [len(skeleton.interactions(*a)) for a in interaction_args]
+    listed = [k for k in interacting[3] if k >= 0]
     return {
         "polygons": scene.n_polygons,
         "views": len(view_args),
@@ -230,7 +234,7 @@ def query_costs(largest, views: int, pairs: int, interactions: int, seed: int) -
         "visible_boundary_refused": boundary[2],
         "discontinuities_ms": discontinuities[0],
         "discontinuities_max_ms": discontinuities[1],
-        "discontinuity_segments_mean": float(np.mean(segments)),
+        "discontinuity_segments_mean": float(np.mean(segments)) if segments else float("nan"),
         "blockers_ms": blockers[0],
         "blockers_max_ms": blockers[1],
         "interaction_polygons": len(interaction_args),
