@@ -1014,7 +1014,8 @@ def _relaxed_arc(
         first = min(first, r_group[j])
         last = max(last, r_group[j])
 
-    # lines running between touching objects between the generators (see _sandwiched) are no arc
+    # the faces whose plane holds every line of the arc; lines running between touching objects between the
+    # generators (see _sandwiched) are no arc
     for k in range(n_sliding):
         n = _row(normals, sl_poly[k])
         in_plane[k] = abs(x[2] * _dot(n, f1) + x[3] * _dot(n, f2)) <= 1e-12 and \
