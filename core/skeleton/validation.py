@@ -1046,10 +1046,10 @@ def _relaxed_arc(
             # object's face in that plane, touching an outer generator and reaching beyond it (a leg's top edge
             # under the table top), makes the lines graze contacts where they end on that side (see
             # END_PLANAR); the other side may be clean (a horizon over a table top from a box standing on it).
-            # Such a face met further on is only grazed (lines along a row of aligned legs) and ends nothing.
+            # A face met further on, past the outer generator, is read after the ends are known (below).
             # A face bounded by the outer generator ends at it (its tolerant overlap may poke past): only faces
             # the generator does not bound count on its side
-            if abs(offset) <= 1e-12:
+            if in_plane[k]:
                 for j in range(n_retained):
                     if _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
                         continue
@@ -1359,6 +1359,7 @@ def _relaxed_arc(
         for j in range(n_retained):
             if _is_incident_face(sl_poly[k], r_kind[j], r_id[j], vf_off, vf_face, ef_off, ef_face):
                 incident = True
+                break
         if incident:
             continue
         if min(sl_b[k], g_tau[first]) - max(sl_a[k], reach_before) > _CONTACT_LENGTHS * tol:
