@@ -64,7 +64,7 @@ from numba import njit
 
 from ..errors import CancelledError, SceneError
 from ..jit import njit_leaf
-from ..raycast import CONTACT_VERTEX, _arcs_cover_circle, _contact_arc, _perpendicular_frame
+from ..raycast import CONTACT_VERTEX, _arcs_cover_circle_with, _contact_arc, _perpendicular_frame
 from ..scene import Scene
 from .candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_FXE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
 from .topology import scene_topology
@@ -1317,24 +1317,24 @@ def _mask_pierced_cells(e, vertices, edges, ef_off, ef_inward, grid, n, delta, m
                     mask[:, (a * n + i) * n + j] = False
 
 
-@njit(cache=True)
-def _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol):
+@njit_leaf
+def _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol, starts, lengths,
+                    bounds):  # fmt: skip
     """Whether the faces around vertex v close around a line of direction d (unit) through it, as validation
     decides for an inner vertex (core.raycast contact arcs), with half its angular gap tolerance; a face
-    nearly containing d leaves it undecided (not pierced)."""
+    nearly containing d leaves it undecided (not pierced). starts, lengths (F,), bounds (2 F,) float64: scratch
+    for the arcs of v's faces (F at least their count; this runs for every pair of edges seen from v)."""
     count = vf_off[v + 1] - vf_off[v]
     if count < 2:
         return False
     e1, e2 = _perpendicular_frame(d)
-    starts = np.empty(count)
-    lengths = np.empty(count)
     for k in range(count):
         face = vf_face[vf_off[v] + k]
         if abs(_dot(normals[face], d)) <= delta:
             return False
         starts[k], lengths[k] = _contact_arc(points, offsets, normals, face, CONTACT_VERTEX, vf_corner[vf_off[v] + k],
                                              e1, e2)  # fmt: skip
-    return _arcs_cover_circle(starts, lengths, count, 0.5 * angle_tol)
+    return _arcs_cover_circle_with(starts, lengths, count, 0.5 * angle_tol, bounds)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -1518,6 +1518,12 @@ def _vertex_candidates(
     incident = np.zeros(edges.shape[0], dtype=np.bool_)
     d = np.empty(3)
     back = np.empty(3)
+    most_faces = 0
+    for w in range(n_vertices):
+        most_faces = max(most_faces, vf_off[w + 1] - vf_off[w])
+    arc_starts = np.empty(most_faces)
+    arc_lengths = np.empty(most_faces)
+    arc_bounds = np.empty(2 * most_faces)
     others = np.empty((3, 3))
     for index in range(lo, hi):
         v = vertex_ids[index]
@@ -1650,7 +1656,8 @@ def _vertex_candidates(
                                 outer, d, vertices, edges, ef_off, ef_inward, delta
                             ):
                                 continue
-                    elif _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol):
+                    elif _vertex_pierced(v, d, points, offsets, normals, vf_off, vf_face, vf_corner, delta, angle_tol,
+                                         arc_starts, arc_lengths, arc_bounds):  # fmt: skip
                         continue
                     if _vee_enters(v, f, g, p, d, tf, tg, others, back, vertex_object, edge_object, object_offsets,
                                    object_polygons, vf_off, vf_face, ef_off, ef_face, normals, plane_offsets, margin,

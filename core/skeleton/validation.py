@@ -148,49 +148,49 @@ _Incidences = namedtuple("_Incidences", "node kind codes end s direction")
 # reference counts and a small array a heap allocation, which together took about half of the kernels' time
 
 
-@njit(cache=True)
+@njit_leaf
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True)
+@njit_leaf
 def _cross(a, b):
     return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
 
 
-@njit(cache=True)
+@njit_leaf
 def _row(array, i):
     """Row i of an (n, 3) array as a 3-tuple."""
     return array[i, 0], array[i, 1], array[i, 2]
 
 
-@njit(cache=True)
+@njit_leaf
 def _minus(a, b):
     return a[0] - b[0], a[1] - b[1], a[2] - b[2]
 
 
-@njit(cache=True)
+@njit_leaf
 def _negated(a):
     return -a[0], -a[1], -a[2]
 
 
-@njit(cache=True)
+@njit_leaf
 def _scaled(a, s):
     return s * a[0], s * a[1], s * a[2]
 
 
-@njit(cache=True)
+@njit_leaf
 def _over(a, s):
     return a[0] / s, a[1] / s, a[2] / s
 
 
-@njit(cache=True)
+@njit_leaf
 def _along(point, t, d):
     """point + t d."""
     return point[0] + t * d[0], point[1] + t * d[1], point[2] + t * d[2]
 
 
-@njit(cache=True)
+@njit_leaf
 def _combined(x, a, y, b):
     """x a + y b."""
     return x * a[0] + y * b[0], x * a[1] + y * b[1], x * a[2] + y * b[2]
@@ -222,7 +222,7 @@ def _line_buffers(capacity):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit_leaf
 def _clip_line(origin, direction, lo, hi):
     """Parameter range (t0, t1) of origin + t direction inside the box [lo, hi]; t0 > t1 when it misses."""
     t0 = -np.inf
@@ -547,7 +547,7 @@ def _solve4(a, b, x):
     return True
 
 
-@njit(cache=True)
+@njit_leaf
 def _edge_direction(vertices, edges, e, away_from):
     """Unit direction (3-tuple) of edge e, from its first vertex, or away from vertex `away_from` if >= 0."""
     a = _row(vertices, edges[e, 0])
@@ -634,7 +634,7 @@ def _first_crossing(points, offsets, normals, areas, c_poly, c_kind, c_local, lo
     return best
 
 
-@njit(cache=True)
+@njit_leaf
 def _near_plane(point, normal, offset, tol):
     return abs(_dot(normal, point) + offset) <= tol
 
@@ -860,7 +860,7 @@ def _end_on_edge(vertices, edges, a, b, tol):
         _segment_gap(vertices, edges, b, _row(vertices, edges[a, 1])) <= tol  # fmt: skip
 
 
-@njit(cache=True)
+@njit_leaf
 def _partner(pair, j):
     """The other member of the crossing pair (a, b) when j is one of them, else -1."""
     if j == pair[0]:
@@ -2452,10 +2452,18 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
-            incidences, n_inc = _pencils_at_shared_corner(
-                geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
-                v, gg[j], gk, gid, gg, ng,
-            )  # fmt: skip
+            # the call counts a reference to each of the dozens of arrays it is passed: made only where another
+            # vertex is met at v's point, which few corners are
+            other_corner = False
+            for i in range(g_lo[gg[j]], g_hi[gg[j]]):
+                if c_kind[i] == CONTACT_VERTEX and corner_vertex[offsets[c_poly[i]] + c_local[i]] != v:
+                    other_corner = True
+                    break
+            if other_corner:
+                incidences, n_inc = _pencils_at_shared_corner(
+                    geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
+                    ve_edge, v, gg[j], gk, gid, gg, ng,
+                )  # fmt: skip
             if n_sliding > 0:
                 incidences, n_inc = _pencils_to_vertex_on_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
