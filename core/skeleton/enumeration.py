@@ -729,20 +729,20 @@ def _depth_map(
             for e in range(nb + 1):
                 for k in range(k0, k1 + 1):
                     for l in range(l0, l1 + 1):
-                        g = grid[a, k, l]
-                        nd = _dot(normal, g)
+                        # by element: row views would cost two reference counts each, in the innermost loop
+                        g0, g1, g2 = grid[a, k, l, 0], grid[a, k, l, 1], grid[a, k, l, 2]
+                        nd = normal[0] * g0 + normal[1] * g1 + normal[2] * g2
                         tvals[e, k, l] = np.nan
                         if abs(nd) <= delta:
                             continue
                         t = -hs[e] / nd
                         inside = True
                         for c in range(count):
-                            corner = points[first + c]
-                            out = edge_out[first + c]
-                            x0 = q[e, 0] + t * g[0] - corner[0]
-                            x1 = q[e, 1] + t * g[1] - corner[1]
-                            x2 = q[e, 2] + t * g[2] - corner[2]
-                            if x0 * out[0] + x1 * out[1] + x2 * out[2] > -margin:
+                            r = first + c
+                            x0 = q[e, 0] + t * g0 - points[r, 0]
+                            x1 = q[e, 1] + t * g1 - points[r, 1]
+                            x2 = q[e, 2] + t * g2 - points[r, 2]
+                            if x0 * edge_out[r, 0] + x1 * edge_out[r, 1] + x2 * edge_out[r, 2] > -margin:
                                 inside = False
                                 break
                         if inside:
@@ -843,13 +843,14 @@ def _depth_map(
             for e in range(nb + 1):
                 for k in range(k0, k1 + 1):
                     for l in range(l0, l1 + 1):
-                        g = grid[a, k, l]
+                        g0, g1, g2 = grid[a, k, l, 0], grid[a, k, l, 1], grid[a, k, l, 2]
                         lo = -np.inf
                         hi = np.inf
                         for r in range(p0, p1):
                             p = object_polygons[r]
-                            nd = _dot(normals[p], g)
-                            h = _dot(normals[p], q[e]) + plane_offsets[p] + margin
+                            nd = normals[p, 0] * g0 + normals[p, 1] * g1 + normals[p, 2] * g2
+                            h = normals[p, 0] * q[e, 0] + normals[p, 1] * q[e, 1] + normals[p, 2] * q[e, 2]
+                            h = h + plane_offsets[p] + margin
                             if nd > 0.0:
                                 hi = min(hi, -h / nd)
                             elif nd < 0.0:
