@@ -1608,20 +1608,21 @@ def _vertex_candidates(
                 rx = order[x]
                 sf = tgts[rx]
                 f = ids[sf]
-                pf = plane[sf]
-                nf = np.sqrt(pf[0] * pf[0] + pf[1] * pf[1] + pf[2] * pf[2])
+                # by element: row views would cost two reference counts each, per pair
+                pf0, pf1, pf2 = plane[sf, 0], plane[sf, 1], plane[sf, 2]
+                nf = np.sqrt(pf0 * pf0 + pf1 * pf1 + pf2 * pf2)
                 for y in range(x + 1, g1):
                     ry = order[y]
                     sg = tgts[ry]
                     g = ids[sg]
                     if f == g or _share_vertex(edges, f, g) or bits[rx] & bits[ry] == 0:
                         continue
-                    pg = plane[sg]
-                    d0 = pf[1] * pg[2] - pf[2] * pg[1]
-                    d1 = pf[2] * pg[0] - pf[0] * pg[2]
-                    d2 = pf[0] * pg[1] - pf[1] * pg[0]
+                    pg0, pg1, pg2 = plane[sg, 0], plane[sg, 1], plane[sg, 2]
+                    d0 = pf1 * pg2 - pf2 * pg1
+                    d1 = pf2 * pg0 - pf0 * pg2
+                    d2 = pf0 * pg1 - pf1 * pg0
                     length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                    if length <= delta * nf * np.sqrt(pg[0] * pg[0] + pg[1] * pg[1] + pg[2] * pg[2]):
+                    if length <= delta * nf * np.sqrt(pg0 * pg0 + pg1 * pg1 + pg2 * pg2):
                         continue
                     d[0] = d0 / length
                     d[1] = d1 / length
