@@ -1719,6 +1719,36 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
     return incidences, n_inc
 
 
+@njit_leaf
+def _on_line_around(vertices, edges, line, e, tau_v, tol):
+    """Whether edge e lies on the line (both ends within tol) with the point at tau_v strictly inside it."""
+    tau_a = _dot(_minus(_row(vertices, edges[e, 0]), line.start), line.u)
+    tau_b = _dot(_minus(_row(vertices, edges[e, 1]), line.start), line.u)
+    if not min(tau_a, tau_b) + tol < tau_v < max(tau_a, tau_b) - tol:
+        return False
+    for end in range(2):
+        off = _minus(_row(vertices, edges[e, end]), line.start)
+        off = _minus(off, _scaled(line.u, _dot(off, line.u)))
+        if _dot(off, off) > tol * tol:
+            return False
+    return True
+
+
+@njit_leaf
+def _slides_along_edge_through(geometry, line, edge_mask, v, tau_v):
+    """Whether a face the line slides over has a masked edge, not at vertex v, lying on the line around v's
+    point (tau_v): the only lines _pencils_to_vertex_on_edge has work on."""
+    edges, offsets, corner_edge = geometry.edges, geometry.offsets, geometry.corner_edge
+    for k in range(line.n_sliding):
+        poly = line.sl_poly[k]
+        for c in range(offsets[poly], offsets[poly + 1]):
+            e = corner_edge[c]
+            if edge_mask[e] and edges[e, 0] != v and edges[e, 1] != v and \
+                    _on_line_around(geometry.vertices, edges, line, e, tau_v, geometry.tol):  # fmt: skip
+                return True
+    return False
+
+
 @njit(cache=True)
 def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
                                v, tau_v, group_v):  # fmt: skip
@@ -1739,17 +1769,10 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
             e = corner_edge[offsets[poly] + side]
             if not edge_mask[e] or edges[e, 0] == v or edges[e, 1] == v:
                 continue
+            if not _on_line_around(vertices, edges, line, e, tau_v, tol):
+                continue
             tau_a = _dot(_minus(_row(vertices, edges[e, 0]), line.start), line.u)
             tau_b = _dot(_minus(_row(vertices, edges[e, 1]), line.start), line.u)
-            if not min(tau_a, tau_b) + tol < tau_v < max(tau_a, tau_b) - tol:
-                continue
-            on_line = True
-            for end in range(2):
-                off = _minus(_row(vertices, edges[e, end]), line.start)
-                off = _minus(off, _scaled(line.u, _dot(off, line.u)))
-                on_line = on_line and _dot(off, off) <= tol * tol
-            if not on_line:
-                continue
             # once per edge: both its faces hold the line
             repeated = False
             for earlier in range(k):
@@ -2464,7 +2487,9 @@ def _validate_chunk(
                     geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
                     ve_edge, v, gg[j], gk, gid, gg, ng,
                 )  # fmt: skip
-            if n_sliding > 0:
+            # lines sliding over a face (along the floor) are many, edges of it around v's point few: the call
+            # counts a reference to each of the dozens of arrays it is passed
+            if n_sliding > 0 and _slides_along_edge_through(geometry, line, edge_mask, v, g_tau[gg[j]]):
                 incidences, n_inc = _pencils_to_vertex_on_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
                     g_tau[gg[j]], gg[j],
