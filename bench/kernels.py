@@ -1,12 +1,13 @@
 """Benchmark `kernels`: where a skeleton stage's CPU time goes, numba kernel by numba kernel (Linux perf).
 
 numba's machine code carries no symbols perf can read, and a kernel loaded from numba's cache keeps no object
-code to name it by. This benchmark keeps the object code numba hands to LLVM (before the first kernel is
-loaded), runs the stage once so that every kernel it uses is loaded, writes /tmp/perf-<pid>.map naming every
-function of every kernel's object at its loaded address (the callees compiled into a kernel are functions of
-its object: they get their own rows), records the stage again with `perf record -p` on this process (all
-threads), and prints the CPU seconds sampled in each function, largest first. The rest of the samples
-(Python, numpy, thread waits) is one row. Needs `perf` (Debian: linux-perf) and permission to record this
+code to name it by. This benchmark keeps the object code numba hands to LLVM as it compiles or loads each
+kernel (hooked before the first one), runs the stage once so that every kernel it uses is loaded, writes
+/tmp/perf-<pid>.map naming every function of every kernel's object at its loaded address (the callees compiled
+into a kernel are functions of its object: they get their own rows; so do numba's reference counts,
+NRT_incref and NRT_decref), records the stage again with `perf record -p` on this process (all threads), and
+prints the CPU seconds sampled in each function, largest first. The rest of the samples (Python, numpy, thread
+waits) is one row. Needs `perf` (Debian: linux-perf) and permission to record this
 process (kernel.perf_event_paranoid <= 2 for a process of one's own).
 
     python -m bench kernels [--scene office-312] [--stage build|enumeration|validation] [--top 25]
