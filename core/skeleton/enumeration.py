@@ -178,7 +178,8 @@ def iter_candidates(
         if phase == "map":
             _vertex_maps(
                 vertex_ids[lo:hi], g.vertices, g.points, g.offsets, g.normals, g.plane_offsets, g.edge_out,
-                g.centres, g.radii, *g.objects, g.grid, cells, g.margin, g.delta, g.eps, lazy, src, g.tol, vertex_depth,
+                g.centres, g.radii, g.widths, g.cell_sine, *g.objects, g.grid, cells, g.margin, g.delta, g.eps, lazy,
+                src, g.tol, vertex_depth,
             )  # fmt: skip
             return None
         if phase == "vertex":
@@ -217,8 +218,8 @@ def iter_candidates(
             )  # fmt: skip
         return _edge_candidates(
             edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
-            g.plane_offsets, g.edge_out, g.centres, g.radii, *g.objects, g.ef_off, g.ef_face, g.ef_inward, g.vf_off,
-            g.vf_face, g.vertex_object, g.edge_object, g.grid, cells,
+            g.plane_offsets, g.edge_out, g.centres, g.radii, g.widths, g.cell_sine, *g.objects, g.ef_off, g.ef_face,
+            g.ef_inward, g.vf_off, g.vf_face, g.vertex_object, g.edge_object, g.grid, cells,
             lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
         )  # fmt: skip
 
@@ -330,6 +331,8 @@ class _Geometry:
         self.centres = scene.centroids
         reach = np.linalg.norm(self.points - self.centres[owner], axis=1)
         self.radii = np.maximum.reduceat(reach, self.offsets[:-1])
+        self.widths = _polygon_widths(self.points, self.offsets, self.edge_out)
+        self.cell_sine = _cell_half_sine(cells)
         self.vf_off = topology.vertex_face_offsets
         self.vf_face = topology.vertex_faces
         self.vf_corner = topology.vertex_face_corner
@@ -375,7 +378,8 @@ def _convex_objects(scene: Scene, margin: float):
     of one crosses its surface, whichever faces it meets. An object is used when every edge of its polygons
     joins exactly two of them and no vertex of it lies in front of one of its face planes (beyond margin).
 
-    Returns polygon CSR (offsets (O+1,), polygon ids) and vertex CSR (offsets (O+1,), (M, 3) positions).
+    Returns polygon CSR (offsets (O+1,), polygon ids) and bounding spheres about the mean vertex (centres
+    (O, 3), radii (O,)).
     """
     owner = scene.object_ids[scene.edge_faces]
     counts = np.diff(scene.edge_face_offsets)
@@ -385,8 +389,8 @@ def _convex_objects(scene: Scene, margin: float):
     open_objects[owner[np.repeat(~closed_edge, counts)]] = True
     polygon_offsets = [0]
     polygon_ids: list[np.ndarray] = []
-    vertex_offsets = [0]
-    vertex_points: list[np.ndarray] = []
+    centres = np.empty((0, 3))
+    radii = np.empty(0)
     for obj in np.flatnonzero(~open_objects):
         polygons = np.flatnonzero(scene.object_ids == obj)
         if len(polygons) < 4:
@@ -398,13 +402,15 @@ def _convex_objects(scene: Scene, margin: float):
             continue
         polygon_ids.append(polygons)
         polygon_offsets.append(polygon_offsets[-1] + len(polygons))
-        vertex_points.append(points)
-        vertex_offsets.append(vertex_offsets[-1] + len(points))
+        centre = points.mean(axis=0)
+        away = points - centre
+        centres = np.vstack([centres, centre])
+        radii = np.append(radii, np.sqrt(away[:, 0] ** 2 + away[:, 1] ** 2 + away[:, 2] ** 2).max())
     return (
         np.array(polygon_offsets, dtype=np.int64),
         np.concatenate(polygon_ids).astype(np.int64) if polygon_ids else np.empty(0, dtype=np.int64),
-        np.array(vertex_offsets, dtype=np.int64),
-        np.concatenate(vertex_points) if vertex_points else np.empty((0, 3)),
+        centres,
+        radii,
     )
 
 
@@ -422,6 +428,32 @@ def _element_object(offsets: np.ndarray, faces: np.ndarray, polygon_object: np.n
         np.logical_and.at(same, element, owners == first[element])
     result[has & same] = first[has & same]
     return result
+
+
+def _polygon_widths(points: np.ndarray, offsets: np.ndarray, edge_out: np.ndarray) -> np.ndarray:
+    """(P,) float64: the width of each convex polygon, its least extent across one of its edges, from its points
+    (N, 3), offsets (P+1,) and outward unit edge normals (N, 3) (row j: the edge from point j to the next)."""
+    counts = np.diff(offsets)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    per_edge = counts[owner]
+    edge = np.repeat(np.arange(len(points)), per_edge)
+    first = np.cumsum(per_edge) - per_edge
+    corner = offsets[owner[edge]] + np.arange(len(edge)) - np.repeat(first, per_edge)
+    depth = np.einsum("kc,kc->k", points[edge] - points[corner], edge_out[edge])
+    return np.minimum.reduceat(np.maximum.reduceat(depth, first), offsets[:-1])
+
+
+def _cell_half_sine(n: int) -> float:
+    """sin of a lower bound on half the angle across any cube-map cell (n per side): the angle from a cell's
+    middle direction to the nearest of its four border planes, least over the cells. The directions of a cell
+    hold the cone of that half angle around its middle, and every wedge holding them opens by twice it."""
+    ticks = -1.0 + 2.0 * np.arange(n + 1) / n
+    lo, hi = ticks[:-1], ticks[1:]
+    middle = 0.5 * (lo + hi)
+    # sine of the angle from direction (1, u, w) to the plane x1 = t x0 is |u - t| / (|(1, u, w)| |(-t, 1)|)
+    gap = np.minimum((middle - lo) / np.sqrt(1.0 + lo * lo), (hi - middle) / np.sqrt(1.0 + hi * hi))
+    length = np.sqrt(1.0 + middle[:, None] ** 2 + middle[None, :] ** 2)
+    return float(np.min(np.minimum(gap[:, None], gap[None, :]) / length))
 
 
 def _grid_directions(n: int) -> np.ndarray:
@@ -624,6 +656,18 @@ def _source_distance(q, nb, centre):
 
 
 @njit_leaf
+def _sphere_off_face(centre, radius, origin, a, eps):
+    """Whether no point of the ball (centre, radius) is seen from `origin` through the faces of axis a, either
+    way, grown by eps as in _polygon_box: every point x of the ball (relative to origin) has |x_b| or |x_c| above
+    (1 + eps) |x_a|."""
+    along = abs(centre[a] - origin[a]) + radius
+    b = (a + 1) % 3
+    c = (a + 2) % 3
+    return (abs(centre[b] - origin[b]) - radius > (1.0 + eps) * along
+            or abs(centre[c] - origin[c]) - radius > (1.0 + eps) * along)  # fmt: skip
+
+
+@njit_leaf
 def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
     """(u0, u1, w0, w1): the box of the lines from the points q[0..nb] through polygon points[first:first+count]
     on the positive face of axis a (u0 > u1 when none crosses that face)."""
@@ -631,16 +675,34 @@ def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
     u1 = -np.inf
     w0 = np.inf
     w1 = -np.inf
+    grown = 1.0 + eps
     for k in range(nb + 1):
         for sign in (1.0, -1.0):
             _to_chart(points[first : first + count], count, a, sign, q[k], buf_a)
-            m = _clip(buf_a, count, 1.0, 0.0, 0.0, buf_b)
-            for r in range(m):
-                for c in range(3):
-                    buf_a[r, c] = buf_b[r, c]
-            m = _clip_pyramid(buf_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, buf_b)
-            if m == 0:
+            # wholly behind, or wholly inside the grown face's cone (the clips below would keep every point:
+            # the same tests, the same arithmetic), most polygons need no clipping
+            behind = True
+            inside = True
+            for r in range(count):
+                x0 = buf_a[r, 0]
+                x1 = buf_a[r, 1]
+                x2 = buf_a[r, 2]
+                if x0 >= 0.0:
+                    behind = False
+                if not (x0 >= 0.0 and grown * x0 + x1 >= 0.0 and grown * x0 - x1 >= 0.0 and grown * x0 + x2 >= 0.0
+                        and grown * x0 - x2 >= 0.0):  # fmt: skip
+                    inside = False
+            if behind:
                 continue
+            m = count
+            if not inside:
+                m = _clip(buf_a, count, 1.0, 0.0, 0.0, buf_b)
+                for r in range(m):
+                    for c in range(3):
+                        buf_a[r, c] = buf_b[r, c]
+                m = _clip_pyramid(buf_a, m, -1.0 - eps, grown, -1.0 - eps, grown, buf_b)
+                if m == 0:
+                    continue
             a0, a1, b0, b1 = _projected_box(buf_a, m)
             u0 = min(u0, a0)
             u1 = max(u1, a1)
@@ -672,27 +734,30 @@ def _any_wanted(wanted, a, k0, k1, l0, l1, n):
 
 @njit(cache=True)
 def _depth_map(
-    q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth, lazy, src, tol,
+    q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, widths, cell_sine, object_offsets,
+    object_polygons, object_centres, object_radii, grid, n, margin, delta, eps, wanted, depth, lazy, src, tol,
 ):  # fmt: skip
     """Depth bounds of the source segment q[0]..q[nb] cut in nb bins (a point when nb == 1 and q[0] == q[1]).
 
-    q (nb+1, 3) bin ends; depth (nb, 2, 3 n n) filled with inf by the caller, lowered here: depth[b, side,
-    cell] bounds where every line leaving bin b through the cell (side 0: along the canonical direction,
-    1: against it) first crosses a polygon interior. A polygon counts when the 8 corner lines (bin ends x
-    cell corners) all cross its plane on one side of the source, beyond the margin, inside it by the margin:
-    the crossings of all the lines then lie in the convex hull of those 8 points, their distances below the
-    largest of the 8. A closed convex object (object_* CSR arrays) counts when a face plane separates it from
-    the source and the 8 corner lines pass through it shrunk by the margin: then every line of the cell does
-    (the set of lines from a point through a convex body is a convex cone, and along the bin the lines of one
-    direction meeting it form an interval), so it crosses the object's surface, nearer than its farthest
-    vertex facing the source. Only cells some bin wants (wanted (nb, 3 n n) bool: a lazy build's source mask)
-    are worked for: the others keep their bound (a larger bound only lets more candidates through). In a lazy
-    build (sources `src`) a polygon or object that no line through the source segment and a source meets is
-    skipped: covering a whole cell, it would be met by every line of the cell, so the cell holds no line
-    through a source and none of its candidates is kept anyway.
+    q (nb+1, 3) bin ends; depth (nb, 2, 3 n n) filled with inf by the caller, lowered here: depth[b, side, cell]
+    bounds where every line leaving bin b through the cell (side 0: along the canonical direction, 1: against it)
+    first crosses a polygon interior. A polygon counts when the 8 corner lines (bin ends x cell corners) all cross
+    its plane on one side of the source, beyond the margin, inside it by the margin: the crossings of all the lines
+    then lie in the convex hull of those 8 points, their distances below the largest of the 8. A closed convex
+    object (object_offsets, object_polygons: CSR of its faces) counts when a face plane separates it from the source
+    and the 8 corner lines pass through it shrunk by the margin: then every line of the cell does (the set of lines
+    from a point through a convex body is a convex cone, and along the bin the lines of one direction meeting it
+    form an interval), so it crosses the object's surface, nearer than its farthest vertex facing the source. A
+    polygon narrower than the patch the lines of any cell cut in its plane (widths (P,) from _polygon_widths), or
+    whose bounding sphere (centres, radii) is seen under less than the half angle of every cell (its sine cell_sine,
+    from _cell_half_sine), is skipped, and so is such an object (object_centres (O, 3), object_radii (O,)). Only
+    cells some bin wants (wanted (nb, 3 n n) bool: a lazy build's source mask) are worked for: the others keep their
+    bound (a larger bound only lets more candidates through). In a lazy build (sources `src`) a polygon or object
+    that no line through the source segment and a source meets is skipped: covering a whole cell, it would be met by
+    every line of the cell, so the cell holds no line through a source and none of its candidates is kept anyway.
     """
     n_poly = normals.shape[0]
+    cell_tan = cell_sine / np.sqrt(1.0 - cell_sine * cell_sine)
     tvals = np.empty((nb + 1, n + 1, n + 1))
     buf_a = np.empty((_CLIP, 3))
     buf_b = np.empty((_CLIP, 3))
@@ -700,19 +765,30 @@ def _depth_map(
     ticks = np.empty(n + 1)
     for k in range(n + 1):
         ticks[k] = -1.0 + 2.0 * k / n
+    # every bin end lies within `half` of the segment's middle
+    middle = np.empty(3)
+    for c in range(3):
+        middle[c] = 0.5 * (q[0, c] + q[nb, c])
+    half = 0.5 * _norm(q[nb] - q[0])
     for p in range(n_poly):
         normal = normals[p]
         ok = True
+        nearest = np.inf
         for k in range(nb + 1):
             hs[k] = _dot(normal, q[k]) + plane_offsets[p]
+            nearest = min(nearest, abs(hs[k]))
             if abs(hs[k]) <= margin or (k > 0 and (hs[k] > 0.0) != (hs[0] > 0.0)):
                 ok = False
                 break
         if not ok:
             continue
-        # a polygon too small to cover a whole cell from the source is skipped (it only makes bounds larger)
-        far = _source_distance(q, nb, centres[p])
-        if far > radii[p] and radii[p] * np.pi < far * 0.45 / n:
+        # the corner lines of a cell from one bin end cut the plane in a patch at least 2 |h| cell_tan wide
+        # (a wedge opening by twice the cell's half angle, met at distance |h|): a polygon narrower than that,
+        # once shrunk by the margin, holds the patch of no cell from any bin end
+        if widths[p] - 2.0 * margin < 2.0 * nearest * cell_tan:
+            continue
+        # nor does one whose bounding sphere is seen from every bin end under less than the cell's half angle
+        if radii[p] < _source_distance(q, nb, centres[p]) * cell_sine:
             continue
         if lazy and not _segment_reaches_sources(q, nb, centres[p], radii[p], src, centres, radii, normals,
                                                  plane_offsets, tol):  # fmt: skip
@@ -720,6 +796,8 @@ def _depth_map(
         first = offsets[p]
         count = offsets[p + 1] - first
         for a in range(3):
+            if _sphere_off_face(centres[p], radii[p] + half, middle, a, eps):
+                continue
             u0, u1, w0, w1 = _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b)
             if not u0 <= u1:
                 continue
@@ -774,6 +852,12 @@ def _depth_map(
 
     # fused occluders: closed convex objects
     for o in range(object_offsets.shape[0] - 1):
+        # too small to hold a whole cell, as for polygons: skip (cheaper, and only leaves bounds larger)
+        if object_radii[o] < _source_distance(q, nb, object_centres[o]) * cell_sine:
+            continue
+        if lazy and not _segment_reaches_sources(q, nb, object_centres[o], object_radii[o], src, centres, radii,
+                                                 normals, plane_offsets, tol):  # fmt: skip
+            continue
         p0 = object_offsets[o]
         p1 = object_offsets[o + 1]
         separated = False
@@ -805,23 +889,9 @@ def _depth_map(
                     dy = points[c, 1] - q[k, 1]
                     dz = points[c, 2] - q[k, 2]
                     reach = max(reach, np.sqrt(dx * dx + dy * dy + dz * dz))
-        # too small to hold a whole cell: skip (cheaper, and only leaves bounds larger)
-        v0 = object_vertex_offsets[o]
-        v1 = object_vertex_offsets[o + 1]
-        centre = np.zeros(3)
-        for r in range(v0, v1):
-            centre += object_vertices[r]
-        centre /= v1 - v0
-        radius = 0.0
-        for r in range(v0, v1):
-            radius = max(radius, _norm(object_vertices[r] - centre))
-        far = _source_distance(q, nb, centre)
-        if far > radius and radius * np.pi < far * 0.45 / n:
-            continue
-        if lazy and not _segment_reaches_sources(q, nb, centre, radius, src, centres, radii, normals, plane_offsets,
-                                                 tol):  # fmt: skip
-            continue
         for a in range(3):
+            if _sphere_off_face(object_centres[o], object_radii[o] + half, middle, a, eps):
+                continue
             u0 = np.inf
             u1 = -np.inf
             w0 = np.inf
@@ -880,8 +950,8 @@ def _depth_map(
 
 @njit(cache=True, nogil=True)
 def _vertex_maps(
-    ids, vertices, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-    object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, lazy, src, tol, out,
+    ids, vertices, points, offsets, normals, plane_offsets, edge_out, centres, radii, widths, cell_sine, object_offsets,
+    object_polygons, object_centres, object_radii, grid, n, margin, delta, eps, lazy, src, tol, out,
 ):  # fmt: skip
     """Depth maps (2, 3 n n) of the vertices `ids` into out[v]; in a lazy build only in the cells whose lines
     may cross a source (the others keep the caller's inf, which prunes nothing)."""
@@ -895,8 +965,9 @@ def _vertex_maps(
             _source_mask(q, 1, src, points, offsets, normals, plane_offsets, edge_out, grid, n, tol, delta, wanted)
         depth[:] = np.inf
         _depth_map(
-            q, 1, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, wanted, depth, lazy, src, tol,
+            q, 1, points, offsets, normals, plane_offsets, edge_out, centres, radii, widths, cell_sine, object_offsets,
+            object_polygons, object_centres, object_radii, grid, n, margin, delta, eps, wanted, depth, lazy,
+            src, tol,
         )  # fmt: skip
         out[v] = depth[0]
 
@@ -1948,8 +2019,8 @@ def _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, vec):
 @njit(cache=True, nogil=True)
 def _edge_candidates(
     sources, source_bins, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, centres, radii,
-    object_offsets, object_polygons, object_vertex_offsets, object_vertices, ef_off, ef_face, ef_inward, vf_off,
-    vf_face, vertex_object, edge_object, grid, n, lazy, src, margin, delta, eps, tol, angle_tol,
+    widths, cell_sine, object_offsets, object_polygons, object_centres, object_radii, ef_off, ef_face,
+    ef_inward, vf_off, vf_face, vertex_object, edge_object, grid, n, lazy, src, margin, delta, eps, tol, angle_tol,
 ):  # fmt: skip
     """E4 candidates whose inner edge of lowest id is one of `sources` (cut in source_bins bins each).
 
@@ -2006,8 +2077,9 @@ def _edge_candidates(
             continue
         depth = np.full((nb, 2, n_cells), np.inf)
         _depth_map(
-            q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, object_offsets, object_polygons,
-            object_vertex_offsets, object_vertices, grid, n, margin, delta, eps, mask, depth, lazy, src, tol,
+            q, nb, points, offsets, normals, plane_offsets, edge_out, centres, radii, widths, cell_sine, object_offsets,
+            object_polygons, object_centres, object_radii, grid, n, margin, delta, eps, mask, depth, lazy,
+            src, tol,
         )  # fmt: skip
         m = 0
         for f in edge_ids:
