@@ -559,6 +559,35 @@ def _clip_pyramid(buf_a, count, lo_u, hi_u, lo_w, hi_w, buf_b):
 
 
 @njit_leaf
+def _clip_to_face(buf_a, count, eps, buf_b):
+    """Clip the polygon buf_a[:count] (chart coordinates) to x0 >= 0 and the face's cone grown by eps (|x1|,
+    |x2| <= (1 + eps) x0); the result ends in buf_a; returns its count. A polygon wholly behind the apex or wholly
+    inside the cone is not clipped: the clips would drop, or keep, every point (the same tests below, the same
+    arithmetic), and most polygons are one or the other."""
+    grown = 1.0 + eps
+    behind = True
+    inside = True
+    for r in range(count):
+        x0 = buf_a[r, 0]
+        x1 = buf_a[r, 1]
+        x2 = buf_a[r, 2]
+        if x0 >= 0.0:
+            behind = False
+        if not (x0 >= 0.0 and grown * x0 + x1 >= 0.0 and grown * x0 - x1 >= 0.0 and grown * x0 + x2 >= 0.0
+                and grown * x0 - x2 >= 0.0):  # fmt: skip
+            inside = False
+    if behind:
+        return 0
+    if inside:
+        return count
+    m = _clip(buf_a, count, 1.0, 0.0, 0.0, buf_b)
+    for r in range(m):
+        for c in range(3):
+            buf_a[r, c] = buf_b[r, c]
+    return _clip_pyramid(buf_a, m, -1.0 - eps, grown, -1.0 - eps, grown, buf_b)
+
+
+@njit_leaf
 def _to_chart(points, count, a, sign, origin, out):
     """points[:count] - origin, times sign, in the coordinates of face axis a: (x_a, x_b, x_c)."""
     b = (a + 1) % 3
@@ -675,34 +704,12 @@ def _polygon_box(points, first, count, q, nb, a, eps, buf_a, buf_b):
     u1 = -np.inf
     w0 = np.inf
     w1 = -np.inf
-    grown = 1.0 + eps
     for k in range(nb + 1):
         for sign in (1.0, -1.0):
             _to_chart(points[first : first + count], count, a, sign, q[k], buf_a)
-            # wholly behind, or wholly inside the grown face's cone (the clips below would keep every point:
-            # the same tests, the same arithmetic), most polygons need no clipping
-            behind = True
-            inside = True
-            for r in range(count):
-                x0 = buf_a[r, 0]
-                x1 = buf_a[r, 1]
-                x2 = buf_a[r, 2]
-                if x0 >= 0.0:
-                    behind = False
-                if not (x0 >= 0.0 and grown * x0 + x1 >= 0.0 and grown * x0 - x1 >= 0.0 and grown * x0 + x2 >= 0.0
-                        and grown * x0 - x2 >= 0.0):  # fmt: skip
-                    inside = False
-            if behind:
+            m = _clip_to_face(buf_a, count, eps, buf_b)
+            if m == 0:
                 continue
-            m = count
-            if not inside:
-                m = _clip(buf_a, count, 1.0, 0.0, 0.0, buf_b)
-                for r in range(m):
-                    for c in range(3):
-                        buf_a[r, c] = buf_b[r, c]
-                m = _clip_pyramid(buf_a, m, -1.0 - eps, grown, -1.0 - eps, grown, buf_b)
-                if m == 0:
-                    continue
             a0, a1, b0, b1 = _projected_box(buf_a, m)
             u0 = min(u0, a0)
             u1 = max(u1, a1)
@@ -1194,7 +1201,18 @@ def _register_from(
             # lines meeting the target within the snap margin (validation accepts them) turn by up to that
             # margin over the distance: the sub-cells are grown by it
             sub_eps = eps + 8.0 * margin / closest if closest > 0.0 else np.inf
+            # the target seen from the bin's middle, within a ball holding every direction from the bin to it
+            for c in range(3):
+                middle[c] = 0.5 * (ends[t, 0, c] + ends[t, 1, c]) - 0.5 * (q[b, c] + q[b + 1, c])
+            target_length = 0.0
+            bin_length = 0.0
+            for c in range(3):
+                target_length += (ends[t, 1, c] - ends[t, 0, c]) ** 2
+                bin_length += (q[b + 1, c] - q[b, c]) ** 2
+            spread = 0.5 * (np.sqrt(target_length) + np.sqrt(bin_length))
             for a in range(3):
+                if _sphere_off_face(middle, spread, origin, a, eps):
+                    continue
                 for side in range(2):
                     sign = 1.0 if side == 0 else -1.0
                     # wholly behind the source along this axis: the first clip would leave nothing
@@ -1205,11 +1223,7 @@ def _register_from(
                     if not ahead:
                         continue
                     _to_chart(quad, corners, a, sign, origin, buf_a)
-                    m = _clip(buf_a, corners, 1.0, 0.0, 0.0, buf_b)
-                    for r in range(m):
-                        for c in range(3):
-                            buf_a[r, c] = buf_b[r, c]
-                    m = _clip_pyramid(buf_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, buf_b)
+                    m = _clip_to_face(buf_a, corners, eps, buf_b)
                     if m == 0:
                         continue
                     u0, u1, w0, w1 = _projected_box(buf_a, m)
