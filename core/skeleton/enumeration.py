@@ -2017,17 +2017,18 @@ def _far_past_ends(moebius, row, s):
 
 
 @njit_leaf
-def _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, vec):
-    """The k-th bounding plane of a cell's cone (chart axis a) applied to vec (3,): >= 0 inside."""
+def _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, rows, r):
+    """The k-th bounding plane of a cell's cone (chart axis a) applied to the vector rows[r] (3,): >= 0 inside.
+    (A row index, not a row: a view would cost two reference counts per call in the pivot loop.)"""
     b = (a + 1) % 3
     c = (a + 2) % 3
     if k == 0:
-        return vec[b] - lo_u * vec[a]
+        return rows[r, b] - lo_u * rows[r, a]
     if k == 1:
-        return hi_u * vec[a] - vec[b]
+        return hi_u * rows[r, a] - rows[r, b]
     if k == 2:
-        return vec[c] - lo_w * vec[a]
-    return hi_w * vec[a] - vec[c]
+        return rows[r, c] - lo_w * rows[r, a]
+    return hi_w * rows[r, a] - rows[r, c]
 
 
 @njit(cache=True, nogil=True)
@@ -2080,6 +2081,7 @@ def _edge_candidates(
         ea = vertices[edges[e, 0]]
         eb = vertices[edges[e, 1]]
         ed = eb - ea
+        source_direction = ed.reshape((1, 3))
         q = np.empty((nb + 1, 3))
         for k in range(nb + 1):
             q[k] = ea + (k / nb) * ed
@@ -2159,19 +2161,21 @@ def _edge_candidates(
                 region[3, 1] = 1.0
                 k_count = 4
                 for k in range(4):
-                    cs = -sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, ed)
-                    ct = sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, along[sx])
-                    cc = sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, rel[sx])
+                    cs = -sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, source_direction, 0)
+                    ct = sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, along, sx)
+                    cc = sign * _cone_value(a, k, lo_u, hi_u, lo_w, hi_w, rel, sx)
                     k_count = _clip2(region, k_count, cs, ct, cc, scratch)
                     for r in range(k_count):
                         region[r, 0] = scratch[r, 0]
                         region[r, 1] = scratch[r, 1]
                 if k_count == 0:
                     continue
-                h = rel[sx]
-                xd = along[sx]
-                if lazy and not _family_may_cross(ea, ed, h, xd, region, k_count, src, points, offsets, tol):
+                if lazy and not _family_may_cross(ea, ed, rel[sx], along[sx], region, k_count, src, points, offsets,
+                                                  tol):  # fmt: skip
                     continue
+                # the pivot's rows as numbers: views would cost reference counts per pivot
+                h0, h1, h2 = rel[sx, 0], rel[sx, 1], rel[sx, 2]
+                xd0, xd1, xd2 = along[sx, 0], along[sx, 1], along[sx, 2]
                 n_chosen = 0
                 behind_after = later_behind
                 chosen_across = False
@@ -2198,10 +2202,10 @@ def _edge_candidates(
                     # by element: views of the rows would cost two reference counts per pair
                     w0, w1, w2 = wg[sy, 0], wg[sy, 1], wg[sy, 2]
                     dg0, dg1, dg2 = dg[sy, 0], dg[sy, 1], dg[sy, 2]
-                    c0 = h[0] * w0 + h[1] * w1 + h[2] * w2
-                    c1 = -(ed[0] * w0 + ed[1] * w1 + ed[2] * w2) - (h[0] * dg0 + h[1] * dg1 + h[2] * dg2)
-                    c2 = xd[0] * w0 + xd[1] * w1 + xd[2] * w2
-                    c3 = -(xd[0] * dg0 + xd[1] * dg1 + xd[2] * dg2)
+                    c0 = h0 * w0 + h1 * w1 + h2 * w2
+                    c1 = -(ed[0] * w0 + ed[1] * w1 + ed[2] * w2) - (h0 * dg0 + h1 * dg1 + h2 * dg2)
+                    c2 = xd0 * w0 + xd1 * w1 + xd2 * w2
+                    c3 = -(xd0 * dg0 + xd1 * dg1 + xd2 * dg2)
                     slack = eps * (abs(c0) + abs(c1) + abs(c2) + abs(c3))
                     if not _curve_meets(c0, c1, c2, c3, region, k_count, slack):
                         continue
@@ -2254,7 +2258,9 @@ def _edge_candidates(
                                 continue
                             for c in range(3):
                                 start[c] = ea[c] + s * ed[c]
-                                d[c] = h[c] + t * xd[c] + ea[c] - start[c]
+                            d[0] = h0 + t * xd0 + ea[0] - start[0]
+                            d[1] = h1 + t * xd1 + ea[1] - start[1]
+                            d[2] = h2 + t * xd2 + ea[2] - start[2]
                             # most roots fall in another cell: the cell's cone (grown by eps), either way along
                             # the line, turns them away before the division
                             v0 = d[a_u] - lo_u * d[a]
