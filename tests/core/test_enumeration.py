@@ -475,3 +475,166 @@ def test_where_a_family_line_meets_its_third_edge_follows_from_s():
     moebius = np.empty((1, 7))
     _along_from_s(rel, along, 0, 1, e[1] - e[0], margin, 1e-8, moebius, 0)
     assert not any(_far_past_ends(moebius, 0, s) for s in np.linspace(0.0, 1.0, 11))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# occlusion-map culls: each skips only what could lower no bound
+
+
+def test_polygon_widths_are_the_least_extent_across():
+    """_polygon_widths against widths known in closed form, on polygons placed at random in space: a w x h
+    rectangle is min(w, h) wide, a triangle its least altitude (twice its area over its longest side)."""
+    from core.skeleton.enumeration import _polygon_widths
+
+    rng = np.random.default_rng(3)
+    polygons, expected = [], []
+    for _ in range(40):
+        rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        shift = rng.uniform(-5.0, 5.0, 3)
+        if rng.uniform() < 0.5:
+            w, h = rng.uniform(0.01, 3.0, 2)
+            flat = np.array([[0.0, 0.0, 0.0], [w, 0.0, 0.0], [w, h, 0.0], [0.0, h, 0.0]])
+            expected.append(min(w, h))
+        else:
+            flat = np.column_stack([rng.uniform(-2.0, 2.0, (3, 2)), np.zeros(3)])
+            if np.cross(flat[1] - flat[0], flat[2] - flat[0])[2] < 0.0:
+                flat = flat[::-1].copy()
+            area = 0.5 * np.cross(flat[1] - flat[0], flat[2] - flat[0])[2]
+            longest = max(np.linalg.norm(flat[k] - flat[k - 1]) for k in range(3))
+            expected.append(2.0 * area / longest)
+        polygons.append(flat @ rotation.T + shift)
+    points = np.concatenate(polygons)
+    offsets = np.concatenate([[0], np.cumsum([len(p) for p in polygons])])
+    out = []
+    for p in polygons:
+        normal = np.cross(p[1] - p[0], p[2] - p[0])
+        along = np.roll(p, -1, axis=0) - p
+        outward = np.cross(along, normal)
+        out.append(outward / np.linalg.norm(outward, axis=1)[:, None])
+    widths = _polygon_widths(points, offsets, np.concatenate(out))
+    np.testing.assert_allclose(widths, expected, rtol=1e-9)
+
+
+@pytest.mark.parametrize("n", [5, 7, 11, 15])
+def test_every_direction_near_a_cells_middle_lies_in_the_cell(n):
+    """_cell_half_sine: random directions within the claimed half angle of each cell's middle direction fall in
+    that cell (_line_cell, the cell the skeleton files a line under); and the bound is the least such angle
+    over the cells to 1 %: just beyond it, some direction of some cell falls out."""
+    from core.skeleton.enumeration import _cell_half_sine, _line_cell
+
+    sine = _cell_half_sine(n)
+    rng = np.random.default_rng(n)
+    ticks = -1.0 + 2.0 * np.arange(n + 1) / n
+    middle = 0.5 * (ticks[:-1] + ticks[1:])
+    escaped = False
+    for a in range(3):
+        for i in range(n):
+            for j in range(n):
+                centre = np.zeros(3)
+                centre[a], centre[(a + 1) % 3], centre[(a + 2) % 3] = 1.0, middle[i], middle[j]
+                centre /= np.linalg.norm(centre)
+                frame = np.linalg.svd(centre[None, :])[2][1:]
+                for angle_scale, must_stay in ((0.999, True), (1.01, False)):
+                    angle = np.arcsin(sine) * angle_scale
+                    for turn in rng.uniform(0.0, 2.0 * np.pi, 24):
+                        d = np.cos(angle) * centre + np.sin(angle) * (np.cos(turn) * frame[0] + np.sin(turn) * frame[1])
+                        ca, ci, cj, flipped = _line_cell(d, n)
+                        inside = (ca, ci, cj, flipped) == (a, i, j, False)
+                        if must_stay:
+                            assert inside, (a, i, j, d)
+                        escaped = escaped or not inside
+    assert escaped, "the bound is not the least half angle: no direction just beyond it left its cell"
+
+
+def test_a_ball_off_a_face_is_seen_through_none_of_it():
+    """_sphere_off_face: wherever it says a ball is off the faces of an axis, no point sampled in the ball
+    (inside and on its surface) is seen through them, grown by eps; and it says so for most balls far off."""
+    from core.skeleton.enumeration import _sphere_off_face
+
+    rng = np.random.default_rng(11)
+    eps = 1e-6
+    origin = np.zeros(3)
+    said_off = 0
+    for _ in range(3000):
+        centre = rng.uniform(-3.0, 3.0, 3)
+        radius = rng.uniform(0.0, 1.0)
+        a = int(rng.integers(3))
+        if not _sphere_off_face(centre, radius, origin, a, eps):
+            continue
+        said_off += 1
+        sample = rng.normal(size=(400, 3))
+        sample *= (radius * rng.uniform(0.0, 1.0, 400) ** (1 / 3) / np.linalg.norm(sample, axis=1))[:, None]
+        sample[:100] *= radius / np.linalg.norm(sample[:100], axis=1)[:, None]
+        x = centre + sample
+        b, c = (a + 1) % 3, (a + 2) % 3
+        through = (np.abs(x[:, b]) <= (1 + eps) * np.abs(x[:, a])) & (np.abs(x[:, c]) <= (1 + eps) * np.abs(x[:, a]))
+        assert not through.any(), (centre, radius, a)
+    assert said_off > 600
+
+
+def test_clip_to_face_equals_clipping_every_polygon():
+    """_clip_to_face skips the clips for polygons wholly behind the apex or wholly inside the face's cone: on
+    random polygons of all three kinds its result is the clipped polygon, point for point."""
+    from core.skeleton.enumeration import _CLIP, _clip, _clip_pyramid, _clip_to_face
+
+    rng = np.random.default_rng(5)
+    eps = 1e-9
+    kinds = Counter()
+    for _ in range(3000):
+        count = int(rng.integers(3, 7))
+        turn = np.sort(rng.uniform(0.0, 2.0 * np.pi, count))
+        centre = rng.uniform(-2.0, 2.0, 3)
+        centre[0] = rng.uniform(-1.0, 3.0)
+        size = rng.uniform(0.01, 1.5)
+        polygon = centre + size * np.column_stack([np.zeros(count), np.cos(turn), np.sin(turn)]) @ np.linalg.qr(
+            rng.normal(size=(3, 3)))[0].T  # fmt: skip
+        buf_a = np.zeros((_CLIP, 3))
+        buf_a[:count] = polygon
+        expected_a = buf_a.copy()
+        scratch = np.zeros((_CLIP, 3))
+        m = _clip(expected_a, count, 1.0, 0.0, 0.0, scratch)
+        expected_a[:m] = scratch[:m]
+        m = _clip_pyramid(expected_a, m, -1.0 - eps, 1.0 + eps, -1.0 - eps, 1.0 + eps, scratch)
+        got = _clip_to_face(buf_a, count, eps, np.zeros((_CLIP, 3)))
+        assert got == m
+        np.testing.assert_array_equal(buf_a[:m], expected_a[:m])
+        kinds["behind" if m == 0 and polygon[:, 0].max() < 0 else "kept whole" if m == count and np.array_equal(
+            expected_a[:m], polygon) else "clipped"] += 1  # fmt: skip
+    assert min(kinds.values()) > 100, kinds
+
+
+@pytest.mark.parametrize("name", ["generic room 2", "team room"])
+def test_depth_map_culls_lose_no_bound(name):
+    """The polygons and objects _depth_map skips (narrower than any cell's patch, seen under less than a cell,
+    off an axis's faces) would have lowered no bound: the maps of every vertex, and of every edge cut in four
+    bins, equal those made with every cull off (infinite widths and object radii, a zero half angle)."""
+    from core.skeleton import enumeration as E
+
+    scene = SCENES[name]()
+    cells = E._cells_per_side(len(scene.edges))
+    g = E._Geometry(scene, cells)
+    n_cells = 3 * cells * cells
+    none = np.empty(0, dtype=np.int64)
+    culls = (g.widths, g.cell_sine, g.objects[0], g.objects[1], g.objects[2], g.objects[3])
+    no_culls = (np.full_like(g.widths, np.inf), 0.0, g.objects[0], g.objects[1], g.objects[2],
+                np.full_like(g.objects[3], np.inf))  # fmt: skip
+    maps = []
+    for widths, sine, o_off, o_poly, o_centres, o_radii in (culls, no_culls):
+        out = np.full((scene.n_vertices, 2, n_cells), np.inf)
+        E._vertex_maps(np.arange(scene.n_vertices), g.vertices, g.points, g.offsets, g.normals, g.plane_offsets,
+                       g.edge_out, g.centres, g.radii, widths, sine, o_off, o_poly, o_centres, o_radii, g.grid, cells,
+                       g.margin, g.delta, g.eps, False, none, g.tol, out)  # fmt: skip
+        edge_maps = []
+        for e in range(len(scene.edges)):
+            ends = scene.vertices[scene.edges[e]]
+            q = ends[0] + np.linspace(0.0, 1.0, 5)[:, None] * (ends[1] - ends[0])
+            depth = np.full((4, 2, n_cells), np.inf)
+            E._depth_map(q, 4, g.points, g.offsets, g.normals, g.plane_offsets, g.edge_out, g.centres, g.radii,
+                         widths, sine, o_off, o_poly, o_centres, o_radii, g.grid, cells, g.margin, g.delta, g.eps,
+                         np.ones((4, n_cells), dtype=np.bool_), depth, False, none, g.tol)  # fmt: skip
+            edge_maps.append(depth)
+        maps.append((out, np.array(edge_maps)))
+    (vertex_culled, edge_culled), (vertex_all, edge_all) = maps
+    assert np.isfinite(vertex_all).mean() > 0.2 and np.isfinite(edge_all).mean() > 0.2
+    np.testing.assert_array_equal(vertex_culled, vertex_all)
+    np.testing.assert_array_equal(edge_culled, edge_all)
