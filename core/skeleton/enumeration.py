@@ -389,8 +389,8 @@ def _convex_objects(scene: Scene, margin: float):
     open_objects[owner[np.repeat(~closed_edge, counts)]] = True
     polygon_offsets = [0]
     polygon_ids: list[np.ndarray] = []
-    centres = np.empty((0, 3))
-    radii = np.empty(0)
+    centres: list[np.ndarray] = []
+    radii: list[float] = []
     for obj in np.flatnonzero(~open_objects):
         polygons = np.flatnonzero(scene.object_ids == obj)
         if len(polygons) < 4:
@@ -404,13 +404,13 @@ def _convex_objects(scene: Scene, margin: float):
         polygon_offsets.append(polygon_offsets[-1] + len(polygons))
         centre = points.mean(axis=0)
         away = points - centre
-        centres = np.vstack([centres, centre])
-        radii = np.append(radii, np.sqrt(away[:, 0] ** 2 + away[:, 1] ** 2 + away[:, 2] ** 2).max())
+        centres.append(centre)
+        radii.append(float(np.sqrt(away[:, 0] ** 2 + away[:, 1] ** 2 + away[:, 2] ** 2).max()))
     return (
         np.array(polygon_offsets, dtype=np.int64),
         np.concatenate(polygon_ids).astype(np.int64) if polygon_ids else np.empty(0, dtype=np.int64),
-        centres,
-        radii,
+        np.array(centres, dtype=np.float64).reshape(-1, 3),
+        np.array(radii, dtype=np.float64),
     )
 
 
