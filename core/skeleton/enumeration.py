@@ -26,6 +26,9 @@ What prunes, and why each prune is safe (validation rejects every line pruned he
   source to the target reach (grown by the snap margin over the target's distance, the turn of a line that
   validation still lets meet it). The generators of one line share the sub-cell of its direction, so curves
   and pairs that share none are not solved.
+* Coplanar pivots. The lines E(s) X(t) of a pivot x lying in one plane with the source edge stay within a height
+  of that plane bounded by x's height over it and tol (_plane_reach): a target lying beyond that height on one
+  side is met by none of them and is not paired.
 * One line, one source edge. An E4 line is kept from its inner edge of lowest id, and the other inner edge
   is one of the two generators on the side holding two: pairs whose two generators there both have lower
   ids than the source edge are not solved (their line is kept from a lower edge).
@@ -220,7 +223,7 @@ def iter_candidates(
             edge_ids[lo:hi], bins[lo:hi], emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
             g.plane_offsets, g.edge_out, g.centres, g.radii, g.widths, g.cell_sine, *g.objects, g.ef_off, g.ef_face,
             g.ef_inward, g.vf_off, g.vf_face, g.vertex_object, g.edge_object, g.grid, cells,
-            lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+            lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol, g.scale,
         )  # fmt: skip
 
     n_maps = sum(1 for step in steps if step[0] == "map")
@@ -357,6 +360,7 @@ class _Geometry:
         self.vertex_object = _element_object(self.vf_off, self.vf_face, polygon_object)
         self.edge_object = _element_object(self.ef_off, self.ef_face, polygon_object)
         self.tol = tol.length
+        self.scale = tol.scale
         self.margin = tol.snap
         self.delta = tol.snap / tol.scale
         self.eps = tol.relative
@@ -2002,6 +2006,35 @@ def _along_from_s(rel, along, x, y, ed, margin, delta, out, row):
 
 
 @njit_leaf
+def _plane_reach(ed, h0, h1, h2, xd0, xd1, xd2, scale, tol):
+    """(n0, n1, n2, reach) for source edge e (direction ed (3,)) and pivot x (from e's first end: offset h, direction
+    xd): the unit normal of the plane through e parallel to x, and how far from that plane a target met by a line
+    of the pivot's family can lie (inf when nothing is bounded: e and x nearly parallel or apart).
+
+    Lines E(s) X(t) more than tol long (shorter ones are no line: _edge_candidates turns them away first) rise
+    from height 0 at E(s) to the height delta of x's line over the plane, so at distance tau along the line they
+    lie within delta |tau| / tol of it. Where such a line meets a target (_meets_segment: within tol of the target
+    grown by tol at both ends), both points lie in the scene's box grown by 2 tol, as E(s) does by tol: |tau| <=
+    scale + 8 tol, and the target's ends lie within that height plus 2 tol. Coplanar edges (delta 0: boxes of one
+    height, edges on one floor) bound their lines to the plane, where most targets are not. Heights are dot
+    products of scene-sized vectors with the normal, each rounded by far less than 1e-12 scale once the angle
+    between e and x exceeds 1e-3 radians: that slack is added wherever a height is compared."""
+    n0 = ed[1] * xd2 - ed[2] * xd1
+    n1 = ed[2] * xd0 - ed[0] * xd2
+    n2 = ed[0] * xd1 - ed[1] * xd0
+    across = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    lengths = np.sqrt(ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2]) * np.sqrt(xd0 * xd0 + xd1 * xd1 + xd2 * xd2)
+    if not across > 1e-3 * lengths:
+        return 0.0, 0.0, 0.0, np.inf
+    n0 /= across
+    n1 /= across
+    n2 /= across
+    slack = 1e-12 * scale
+    delta = abs(n0 * h0 + n1 * h1 + n2 * h2) + slack
+    return n0, n1, n2, delta * (scale + 8.0 * tol) / tol + 2.0 * tol + slack
+
+
+@njit_leaf
 def _far_past_ends(moebius, row, s):
     """Whether the line of the family through E(s) meets y outside its u range (moebius[row], see
     _along_from_s), without a division; False when the range is unbounded or the map has its pole at s."""
@@ -2036,6 +2069,7 @@ def _edge_candidates(
     sources, source_bins, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out, centres, radii,
     widths, cell_sine, object_offsets, object_polygons, object_centres, object_radii, ef_off, ef_face,
     ef_inward, vf_off, vf_face, vertex_object, edge_object, grid, n, lazy, src, margin, delta, eps, tol, angle_tol,
+    scale,
 ):  # fmt: skip
     """E4 candidates whose inner edge of lowest id is one of `sources` (cut in source_bins bins each).
 
@@ -2176,6 +2210,10 @@ def _edge_candidates(
                 # the pivot's rows as numbers: views would cost reference counts per pivot
                 h0, h1, h2 = rel[sx, 0], rel[sx, 1], rel[sx, 2]
                 xd0, xd1, xd2 = along[sx, 0], along[sx, 1], along[sx, 2]
+                # a pivot coplanar with e (a fifth of them in an office) holds its lines to their plane: the
+                # targets lying off it on one side are met by none
+                p0, p1, p2, reach = _plane_reach(ed, h0, h1, h2, xd0, xd1, xd2, scale, tol)
+                bounded = reach < scale
                 n_chosen = 0
                 behind_after = later_behind
                 chosen_across = False
@@ -2199,6 +2237,11 @@ def _edge_candidates(
                         continue
                     if bits[rx] & bits[ry] == 0:
                         continue
+                    if bounded:
+                        height = p0 * rel[sy, 0] + p1 * rel[sy, 1] + p2 * rel[sy, 2]
+                        rise = p0 * along[sy, 0] + p1 * along[sy, 1] + p2 * along[sy, 2]
+                        if min(height, height + rise) > reach or max(height, height + rise) < -reach:
+                            continue
                     # by element: views of the rows would cost two reference counts per pair
                     w0, w1, w2 = wg[sy, 0], wg[sy, 1], wg[sy, 2]
                     dg0, dg1, dg2 = dg[sy, 0], dg[sy, 1], dg[sy, 2]

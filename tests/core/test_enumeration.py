@@ -638,3 +638,70 @@ def test_depth_map_culls_lose_no_bound(name):
     assert np.isfinite(vertex_all).mean() > 0.2 and np.isfinite(edge_all).mean() > 0.2
     np.testing.assert_array_equal(vertex_culled, vertex_all)
     np.testing.assert_array_equal(edge_culled, edge_all)
+
+
+# E4 pivots coplanar with the source edge: their lines stay near the common plane
+
+
+@pytest.mark.parametrize("size", [1e-3, 1.0, 1e4])
+def test_plane_reach_keeps_every_target_a_pivot_line_meets(size):
+    """_plane_reach's bound, by construction of the worst lines: e and x cross at P (x lifted off e's plane by
+    `lift`, the rounding of a real scene and far more); the lines E X with E on e and X on x a little over tol
+    apart near P tilt the most, by lift over their length. A target is laid through a point of such a line,
+    anywhere in the scene's box, tilted at random: the prune (both ends of the target, grown by tol, beyond the
+    reach on one side) never drops it. And it bites: with x in e's plane, targets 1e-3 of the scene off the
+    plane are dropped; with x well off the plane, nothing is bounded."""
+    from core.skeleton.enumeration import _plane_reach
+
+    rng = np.random.default_rng(11)
+    scale = np.sqrt(3.0) * size  # the box [0, size]^3
+    tol = 1e-9 * scale
+    kept = dropped = 0
+    for trial in range(400):
+        rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        centre = np.full(3, 0.5 * size)
+        along_e = rotation[0]
+        along_x = np.cos(rng.uniform(0.01, 3.13)) * rotation[0] + np.sin(rng.uniform(0.01, 3.13)) * rotation[1]
+        along_x /= np.linalg.norm(along_x)
+        normal = rotation[2]
+        lift = (0.0, 1e-15, 1e-13, 1e-11)[trial % 4] * scale
+        half_e, half_x = rng.uniform(0.05, 0.4, 2) * size
+        e_a, e_b = centre - half_e * along_e, centre + half_e * along_e
+        x_a, x_b = centre + lift * normal - half_x * along_x, centre + lift * normal + half_x * along_x
+        reach = _plane_reach(e_b - e_a, *(x_a - e_a), *(x_b - x_a), scale, tol)
+        plane = np.array(reach[:3])
+        assert abs(abs(plane @ normal) - 1.0) < 1e-9
+        assert reach[3] < scale
+        for _ in range(20):
+            # E and X near the crossing, |X - E| between tol and 3 tol: the steepest lines of the family
+            length = rng.uniform(1.001, 3.0) * tol
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            point_e = centre + (length * np.cos(angle)) * along_e
+            point_x = x_a + ((centre - x_a) @ along_x + length * np.sin(angle)) * along_x
+            direction = point_x - point_e
+            if np.linalg.norm(direction) <= tol:
+                continue
+            direction /= np.linalg.norm(direction)
+            # a point of the line in the box, and a target through a point within tol of it
+            exits = [(0.0 - point_e) / direction, (size - point_e) / direction]
+            far = np.min(np.abs(np.max(exits, axis=0)))
+            near = -np.min(np.abs(np.min(exits, axis=0)))
+            on_line = point_e + rng.uniform(near, far) * direction
+            met = on_line + rng.normal(size=3) * (0.5 * tol / np.sqrt(3.0))
+            spread = rng.normal(size=3)
+            spread *= rng.uniform(0.0, 0.3) * size / np.linalg.norm(spread)
+            y_a, y_b = met - rng.uniform(0.0, 1.0) * spread, met + rng.uniform(0.0, 1.0) * spread
+            height = plane @ (y_a - e_a)
+            rise = plane @ (y_b - y_a)
+            assert not (min(height, height + rise) > reach[3] or max(height, height + rise) < -reach[3]), (
+                trial, lift, length, reach[3], height, rise)
+            kept += 1
+        if lift == 0.0:
+            off = plane * (2e-3 * scale + rng.uniform(0.0, 0.3) * size) * rng.choice([-1.0, 1.0])
+            y_a = centre + off + rng.uniform(-0.2, 0.2, 3) * size * (1.0 - np.abs(normal))
+            height = plane @ (y_a - e_a)
+            dropped += abs(height) > reach[3]
+        far_x = x_a + 0.01 * size * normal
+        assert _plane_reach(e_b - e_a, *(far_x - e_a), *(x_b - x_a), scale, tol)[3] >= scale
+    assert kept > 7000
+    assert dropped == 100
