@@ -190,7 +190,7 @@ def iter_candidates(
                 vertex_ids, lo, hi, vmask, emask, g.vertices, g.edges, g.points, g.offsets, g.normals,
                 g.plane_offsets, g.edge_out, g.vf_off, g.vf_face, g.vf_corner, g.ve_off, g.ve_edge, g.ef_off,
                 g.ef_face, g.ef_inward, g.vertex_object, g.edge_object, g.objects[0], g.objects[1], g.centres,
-                g.radii, g.grid, cells, vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol,
+                g.radii, g.grid, cells, vertex_depth, lazy, src, g.margin, g.delta, g.eps, g.tol, g.angle_tol, g.scale,
             )  # fmt: skip
         if phase == "crossing":
             return _crossing_candidates(
@@ -1585,9 +1585,16 @@ def _vertex_candidates(
     vertex_ids, lo, hi, vmask, emask, vertices, edges, points, offsets, normals, plane_offsets, edge_out,
     vf_off, vf_face, vf_corner, ve_off, ve_edge, ef_off, ef_face, ef_inward, vertex_object, edge_object,
     object_offsets, object_polygons, centres, radii, grid, n, vertex_depth, lazy, src, margin, delta, eps, tol,
-    angle_tol,
+    angle_tol, scale,
 ):  # fmt: skip
-    """VV candidates (v, w > v) and VEE / EVE candidates of the vertices vertex_ids[lo:hi]."""
+    """VV candidates (v, w > v) and VEE / EVE candidates of the vertices vertex_ids[lo:hi].
+
+    A VEE line through v meets edges f and g in the planes (v, f) and (v, g): on their common line, which meets
+    f inside it only where f crosses g's plane, and g where it crosses f's. A pair whose edge lies wholly on one
+    side of the other's plane is not solved: beyond a height of 2 tol (a meeting within tol of the edge grown by
+    tol, as _meets_segment accepts) and 1e-6 scale, which covers the rounding of the line's direction (the planes
+    meet at an angle above delta: the rounded cross product leaves them by at most 1e-7 scale across the
+    scene)."""
     out = _new_output(1024)
     count = 0
     n_cells = 3 * n * n
@@ -1601,6 +1608,8 @@ def _vertex_candidates(
     slots = np.empty(n_edges, dtype=np.int64)
     ids = np.empty(n_edges, dtype=np.int64)
     plane = np.empty((n_edges, 3))
+    unit = np.empty((n_edges, 3))
+    reach = 2.0 * tol + 1e-6 * scale
     keys = np.empty(4096, dtype=np.int64)
     tgts = np.empty(4096, dtype=np.int64)
     sides = np.empty(4096, dtype=np.int8)
@@ -1681,6 +1690,10 @@ def _vertex_candidates(
             plane[m, 0] = fa1 * fb2 - fa2 * fb1
             plane[m, 1] = fa2 * fb0 - fa0 * fb2
             plane[m, 2] = fa0 * fb1 - fa1 * fb0
+            # an edge whose line passes through v (within rounding) spans no plane: no pair is cut by it
+            norm = np.sqrt(plane[m, 0] ** 2 + plane[m, 1] ** 2 + plane[m, 2] ** 2)
+            for c in range(3):
+                unit[m, c] = plane[m, c] / norm if norm > 0.0 else 0.0
             ids[m] = e
             slots[m] = m
             m += 1
@@ -1705,6 +1718,8 @@ def _vertex_candidates(
                     sg = tgts[ry]
                     g = ids[sg]
                     if f == g or _share_vertex(edges, f, g) or bits[rx] & bits[ry] == 0:
+                        continue
+                    if _off_plane(unit, ends, p, sf, sg, reach) or _off_plane(unit, ends, p, sg, sf, reach):
                         continue
                     pg0, pg1, pg2 = plane[sg, 0], plane[sg, 1], plane[sg, 2]
                     d0 = pf1 * pg2 - pf2 * pg1
@@ -1760,6 +1775,18 @@ def _vertex_candidates(
                     out = _push(out, count, CANDIDATE_VEE, v, -1, min(f, g), max(f, g), -1, -1, p, d)
                     count += 1
     return _trim(out, count)
+
+
+@njit_leaf
+def _off_plane(unit, ends, p, plane_row, edge_row, reach):
+    """Whether both ends of target edge_row (ends (M, 2, 3)) lie beyond `reach` on one side of the plane through p
+    of unit normal unit[plane_row]."""
+    h0 = 0.0
+    h1 = 0.0
+    for c in range(3):
+        h0 += unit[plane_row, c] * (ends[edge_row, 0, c] - p[c])
+        h1 += unit[plane_row, c] * (ends[edge_row, 1, c] - p[c])
+    return min(h0, h1) > reach or max(h0, h1) < -reach
 
 
 @njit_leaf

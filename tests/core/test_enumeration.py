@@ -705,3 +705,67 @@ def test_plane_reach_keeps_every_target_a_pivot_line_meets(size):
         assert _plane_reach(e_b - e_a, *(far_x - e_a), *(x_b - x_a), scale, tol)[3] >= scale
     assert kept > 7000
     assert dropped == 100
+
+
+@pytest.mark.parametrize("size", [1e-3, 1.0, 1e4])
+def test_vee_pairs_off_a_plane_are_those_no_line_meets(size):
+    """_off_plane as _vertex_candidates uses it: edges f and g are laid within tol of two points of a line
+    through v (at any angle; a third of them nearly pointing at v, where the plane through v and the edge is
+    barely defined; a third of the g edges along f's plane, as high over it as their offset from the line). The
+    kernel's line, where the two planes meet as it computes them, is tested against both edges as it tests
+    them (_meets_segment): whenever it meets both, neither edge is off the other's plane. An edge moved wholly
+    to one side of the plane, 1e-5 of the scene or more, always is."""
+    from core.skeleton.enumeration import _meets_segment, _off_plane
+
+    rng = np.random.default_rng(5)
+    scale = np.sqrt(3.0) * size
+    tol = 1e-9 * scale
+    delta = 16.0 * tol / scale
+    reach = 2.0 * tol + 1e-6 * scale
+    no_faces = (np.zeros((0, 3)), np.zeros(0), np.zeros(3, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    met = off = tried = 0
+    for trial in range(3000):
+        p = rng.uniform(0.0, size, 3)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        ends = np.empty((2, 2, 3))
+        tilts = np.empty((2, 3))
+        for k in range(2):
+            # within tol of the line, which _meets_segment accepts
+            aside = np.cross(d, rng.normal(size=3))
+            aside *= rng.uniform(0.0, 0.95) * tol / np.linalg.norm(aside)
+            on_line = p + rng.uniform(0.01, 0.8) * size * rng.choice([-1.0, 1.0]) * d + aside
+            tilt = rng.normal(size=3)
+            tilt /= np.linalg.norm(tilt)
+            if trial % 3 == 0:
+                tilt = d + 10.0 ** rng.uniform(-12.0, -4.0) * tilt
+                tilt /= np.linalg.norm(tilt)
+            if trial % 3 == 1 and k == 1:
+                tilt = rng.normal() * d + rng.normal() * tilts[0]
+                tilt /= np.linalg.norm(tilt)
+            tilts[k] = tilt
+            lengths = rng.uniform(0.01, 0.5, 2) * size
+            ends[k, 0] = on_line - lengths[0] * tilt
+            ends[k, 1] = on_line + lengths[1] * tilt
+        planes = np.cross(ends[:, 0] - p, ends[:, 1] - p)
+        unit = planes / np.linalg.norm(planes, axis=1)[:, None]
+        line = np.cross(planes[0], planes[1])
+        if np.linalg.norm(line) <= delta * np.linalg.norm(planes[0]) * np.linalg.norm(planes[1]):
+            continue
+        line /= np.linalg.norm(line)
+        vertices = ends.reshape(4, 3)
+        edges = np.array([[0, 1], [2, 3]], dtype=np.int64)
+        meets = [_meets_segment(p, line, vertices, edges, no_faces[0], no_faces[1], no_faces[2], no_faces[3], k, tol,
+                                delta)[0] for k in range(2)]  # fmt: skip
+        if all(meets):
+            met += 1
+            assert not _off_plane(unit, ends, p, 0, 1, reach), trial
+            assert not _off_plane(unit, ends, p, 1, 0, reach), trial
+        moved = ends.copy()
+        heights = (ends[1] - p) @ unit[0]
+        lift = np.abs(heights).max() + 1e-5 * scale + rng.uniform(0.0, 0.3) * size
+        moved[1] += lift * rng.choice([-1.0, 1.0]) * unit[0]
+        off += _off_plane(unit, moved, p, 0, 1, reach)
+        tried += 1
+    assert met > 1000
+    assert off == tried > 2000
