@@ -29,6 +29,9 @@ What prunes, and why each prune is safe (validation rejects every line pruned he
 * Coplanar pivots. The lines E(s) X(t) of a pivot x lying in one plane with the source edge stay within a height
   of that plane bounded by x's height over it and tol (_plane_reach): a target lying beyond that height on one
   side is met by none of them and is not paired.
+* Planes through the vertex. A VEE line through v meets edges f and g on the line where the planes (v, f)
+  and (v, g) meet: a pair whose edge lies wholly on one side of the other's plane (beyond what _meets_segment
+  tolerates, and rounding) is not solved (_off_plane).
 * One line, one source edge. An E4 line is kept from its inner edge of lowest id, and the other inner edge
   is one of the two generators on the side holding two: pairs whose two generators there both have lower
   ids than the source edge are not solved (their line is kept from a lower edge).
