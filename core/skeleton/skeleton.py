@@ -814,20 +814,83 @@ def _merged_within(scene: Scene, nodes: NodeChunk, incidences: IncidenceChunk, e
     nodes, node_id = _one_node_per_line(dict(vars(nodes)), node_line)
     node = node_id[incidences.node]
     codes = incidences.codes
-    order = np.lexsort((incidences.s, incidences.direction, codes[:, 2], codes[:, 1], codes[:, 0],
-                        incidences.kind, node))  # fmt: skip
-    same = (node[order[1:]] == node[order[:-1]]) & (incidences.direction[order[1:]] == incidences.direction[order[:-1]])
-    same &= incidences.kind[order[1:]] == incidences.kind[order[:-1]]
-    same &= (codes[order[1:]] == codes[order[:-1]]).all(axis=1)
-    edge = np.where(codes >= scene.n_vertices, codes - scene.n_vertices, len(edge_tol)).min(axis=1)
-    step = incidences.s[order[1:]] - incidences.s[order[:-1]]
-    same &= step <= edge_tol[edge[order[1:]]]
-    kept = np.ones(len(node), dtype=bool)
-    kept[order[1:][same]] = False
+    kept = _not_repeated(node, len(nodes), incidences.kind, codes, incidences.direction, incidences.s, edge_tol,
+                         scene.n_vertices)  # fmt: skip
     return nodes, IncidenceChunk(
         node[kept].astype(np.int32), incidences.kind[kept], codes[kept], incidences.end[kept], incidences.s[kept],
         incidences.direction[kept],
     )
+
+
+@njit(cache=True)
+def _not_repeated(node, n_nodes, kind, codes, direction, s, edge_tol, n_vertices):
+    """(M,) bool: the incidences (node (M,) int32 in 0..n_nodes, kind (M,) int8, codes (M, 3), direction (M,)
+    int8, s (M,) float64) that do not repeat one of their node's. Sorted by node, kind, codes, direction, then
+    s (ties in index order, NaN last: np.lexsort's order), an incidence repeats the one before it when all but
+    s agree and s is within edge_tol (E,) of it on their parameter edge (the lowest edge code - n_vertices).
+    The incidences of one node, a handful, are sorted by insertion; a node of many (a line met by many merged
+    nodes) by stable sorts of its rows, one per key from the last."""
+    m = len(node)
+    first = np.zeros(n_nodes + 1, dtype=np.int64)
+    for i in range(m):
+        first[node[i] + 1] += 1
+    for k in range(n_nodes):
+        first[k + 1] += first[k]
+    order = np.empty(m, dtype=np.int64)
+    filled = first[:-1].copy()
+    for i in range(m):
+        order[filled[node[i]]] = i
+        filled[node[i]] += 1
+    kept = np.ones(m, dtype=np.bool_)
+    for k in range(n_nodes):
+        lo = first[k]
+        hi = first[k + 1]
+        if hi - lo > _INSERTION_ROWS:
+            rows = order[lo:hi]
+            rows = rows[np.argsort(s[rows], kind="mergesort")]
+            rows = rows[np.argsort(direction[rows], kind="mergesort")]
+            for column in range(2, -1, -1):
+                rows = rows[np.argsort(codes[rows, column], kind="mergesort")]
+            order[lo:hi] = rows[np.argsort(kind[rows], kind="mergesort")]
+        else:
+            for p in range(lo + 1, hi):
+                moving = order[p]
+                q = p
+                while q > lo and _incidence_before(moving, order[q - 1], kind, codes, direction, s):
+                    order[q] = order[q - 1]
+                    q -= 1
+                order[q] = moving
+        for p in range(lo + 1, hi):
+            a = order[p - 1]
+            b = order[p]
+            if kind[a] != kind[b] or direction[a] != direction[b]:
+                continue
+            if codes[a, 0] != codes[b, 0] or codes[a, 1] != codes[b, 1] or codes[a, 2] != codes[b, 2]:
+                continue
+            edge = len(edge_tol)
+            for c in range(3):
+                if codes[b, c] >= n_vertices:
+                    edge = min(edge, codes[b, c] - n_vertices)
+            if edge < len(edge_tol) and s[b] - s[a] <= edge_tol[edge]:
+                kept[b] = False
+    return kept
+
+
+#: most incidences of one node sorted by insertion (quadratic); more by stable sorts
+_INSERTION_ROWS = 32
+
+
+@njit(cache=True)
+def _incidence_before(a, b, kind, codes, direction, s):
+    """Whether incidence a sorts strictly before b by kind, codes, direction, then s (NaN last)."""
+    if kind[a] != kind[b]:
+        return kind[a] < kind[b]
+    for c in range(3):
+        if codes[a, c] != codes[b, c]:
+            return codes[a, c] < codes[b, c]
+    if direction[a] != direction[b]:
+        return direction[a] < direction[b]
+    return s[a] < s[b] or (s[b] != s[b] and s[a] == s[a])
 
 
 @njit(cache=True)

@@ -1012,6 +1012,48 @@ def test_incidences_sort_as_lexsort_does():
         np.testing.assert_array_equal(order, expected)
 
 
+def _naive_not_repeated(node, kind, codes, direction, s, edge_tol, n_vertices) -> np.ndarray:
+    """Which incidences do not repeat one of their node's: np.lexsort by node, kind, codes, direction, s, then
+    each one within edge_tol of the one before it with all else equal is a repeat."""
+    order = np.lexsort((s, direction, codes[:, 2], codes[:, 1], codes[:, 0], kind, node))
+    a, b = order[:-1], order[1:]
+    same = (node[a] == node[b]) & (kind[a] == kind[b]) & (direction[a] == direction[b])
+    same &= (codes[a] == codes[b]).all(axis=1)
+    edge = np.where(codes >= n_vertices, codes - n_vertices, len(edge_tol)).min(axis=1)
+    same &= s[b] - s[a] <= edge_tol[edge[b]]
+    kept = np.ones(len(node), dtype=bool)
+    kept[b[same]] = False
+    return kept
+
+
+def test_repeated_incidences_are_those_lexsort_finds():
+    """The incidences a chunk's merged nodes repeat are those found by sorting them all with np.lexsort: with
+    tied and NaN coordinates, chains of coordinates each within the tolerance of the one before, and nodes of
+    fewer and more incidences than an insertion sort takes."""
+    from core.skeleton.skeleton import _INSERTION_ROWS, _not_repeated
+
+    rng = np.random.default_rng(5)
+    n_vertices = 4
+    edge_tol = np.array([0.1, 0.2, 0.05, 0.3])
+    count = 30000
+    sizes = np.concatenate([rng.integers(1, 9, 3000), [_INSERTION_ROWS, _INSERTION_ROWS + 1, 400, 2000]])
+    node = np.repeat(np.arange(len(sizes)), sizes)[:count].astype(np.int32)
+    rng.shuffle(node)
+    count = len(node)
+    # a few arcs per node: EV arcs (a vertex, an edge) and EEE arcs, differing in one generator
+    arcs = np.array([[1, 4, -1], [1, 5, -1], [4, 5, 6], [4, 5, 7], [5, 6, 7]], dtype=np.int32)
+    variant = rng.integers(0, len(arcs), count)
+    codes = arcs[variant]
+    kind = (codes[:, 2] >= 0).astype(np.int8)
+    direction = rng.choice(np.array([-1, 1], dtype=np.int8), count)
+    s = rng.choice(np.array([0.0, -0.0, 0.04, 0.08, 0.12, 0.3, np.nan]), count)
+    s[::5] = rng.uniform(size=len(s[::5]))
+    expected = _naive_not_repeated(node, kind, codes, direction, s, edge_tol, n_vertices)
+    assert 0.2 * count < (~expected).sum() < 0.8 * count
+    kept = _not_repeated(node, len(sizes), kind, codes, direction, s, edge_tol, n_vertices)
+    np.testing.assert_array_equal(kept, expected)
+
+
 def _naive_coincident_nodes(start, direction, scale, tol) -> np.ndarray:
     """coincident_nodes by comparing every pair of lines: feet over scale and directions, either orientation,
     within tol / scale in six dimensions; the lowest id of each connected set."""
