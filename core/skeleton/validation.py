@@ -871,45 +871,26 @@ def _partner(pair, j):
 
 
 @njit_leaf
-def _relax(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc, node):
-    """_relaxed_arc of node `node` of `line` (_Line) with the retained generators (r_kind, r_id, r_group, r_pin) =
-    retained, recorded at row n_inc of `incidences` (_Incidences) when the arc exists; returns the next free row.
+def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc, node):
+    """One arc adjacent to node `node` of `line` (_Line, its frame f1, f2 perpendicular to u) in the scene
+    `geometry` (_Geometry), recorded at row n_inc of `incidences` (_Incidences) when it exists; returns the next
+    free row. retained = (r_kind, r_id, r_group, r_pin), (3,) arrays: the retained generators, n_retained of them
+    in any order; the motion normalised by sliding retained edge `norm_index` by sigma * norm_dir (3-vector);
+    r_pin: for a retained edge met at one of its vertices, that vertex (its contact must move into the edge),
+    else -1. scratch: the work arrays (_Scratch; x below: its solution, the motion's coefficients).
 
-    A leaf kernel (core.jit): the named tuples' dozens of arrays are handed on without counting references,
-    which a caller that counts them would do for each at every call."""
-    g = geometry
-    r_kind, r_id, r_group, r_pin = retained
-    return _relaxed_arc(
-        g.points, g.offsets, g.normals, g.areas, g.vertices, g.edges, g.vf_off, g.vf_face, g.vf_corner, g.ef_off,
-        g.ef_face, g.ef_local, g.corner_edge, g.face_group, g.object_ids, g.element_solid, g.diag, g.tol,
-        g.angle_tol, line.c_poly, line.c_kind, line.c_local, line.g_lo, line.g_hi, line.g_tau, line.n_groups,
-        line.sl_poly, line.sl_a, line.sl_b, line.n_sliding, line.start, line.u, line.f1, line.f2,
-        r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
-        scratch.polys, scratch.kinds, scratch.locals_, scratch.arc_start, scratch.arc_len, scratch.bounds,
-        scratch.in_plane, scratch.system, scratch.rhs, scratch.solution, scratch.order, scratch.codes, scratch.touch,
-        scratch.touch_face, scratch.planar, scratch.behind, scratch.angles, incidences, n_inc, node,
-    )  # fmt: skip
-
-
-@njit_leaf
-def _relaxed_arc(
-    points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-    corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol,
-    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2,
-    r_kind, r_id, r_group, r_pin, n_retained, norm_index, norm_dir, sigma,
-    polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
-    planar, behind, angles, incidences, n_inc, node,
-):  # fmt: skip
-    """One arc adjacent to a node, recorded at row n_inc of `incidences` (_Incidences) when it exists; returns
-    the next free row. The scene (_Geometry fields), the node's line (_Line fields, the frame f1, f2
-    perpendicular to u), then the retained generators r_* (3,) arrays, n_retained of them in any order, the
-    motion normalised by sliding retained edge `norm_index` by sigma * norm_dir (3-vector); r_pin: for a retained
-    edge met at one of its vertices, that vertex (its contact must move into the edge), else -1; then the work
-    arrays (_Scratch fields, x the motion's coefficients).
+    The named tuples are handed over whole (a leaf kernel, core.jit: no reference counts): unpacked into sixty
+    arguments by a wrapper, as before, office-312's validation took 1.6 % longer on one thread (2026-11-27).
 
     The row holds the arc kind, the generators in canonical line order, the end faces before and after them,
     the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
     vertex) and the direction, +1 when the arc extends towards larger s."""
+    (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+     corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry
+    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2 = line
+    r_kind, r_id, r_group, r_pin = retained
+    (polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
+     planar, behind, angles) = scratch
     # the motion sliding the contact on an edge off its crossing with another kept edge, on a line lying in
     # their plane: the lines keep meeting both in that plane, turning about the point where the third kept
     # generator meets it (a pencil of the contact plane: seed 003's fv arcs of an FvE node, keyed as EEE)
@@ -1506,7 +1487,7 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
             r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
             norm_dir = _edge_direction(g_.vertices, edges, e, -1)
             for sigma in (1.0, -1.0):
-                n_inc = _relax(geometry, line, retained, 2, 1, norm_dir, sigma, scratch, incidences, n_inc, node)
+                n_inc = _relaxed_arc(geometry, line, retained, 2, 1, norm_dir, sigma, scratch, incidences, n_inc, node)
     return incidences, n_inc
 
 
@@ -1549,7 +1530,7 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
             r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
             r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
             r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, group_v
-            n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
+            n_inc = _relaxed_arc(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
             r_pin[1] = -1
     return n_inc
 
@@ -1574,7 +1555,7 @@ def _swaths_leaving_both_vertices(geometry, line, retained, scratch, incidences,
             r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
             r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
             norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_slide, gid[0])
-            n_inc = _relax(geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node)
+            n_inc = _relaxed_arc(geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node)
             r_pin[1] = -1
     return n_inc
 
@@ -1635,7 +1616,9 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
                 r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_c, groups[2], pins[2, c]
                 norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_a, -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relax(geometry, line, retained, 3, 0, norm_dir, sigma, scratch, incidences, n_inc, node)
+                    n_inc = _relaxed_arc(
+                        geometry, line, retained, 3, 0, norm_dir, sigma, scratch, incidences, n_inc, node
+                    )
     for k in range(3):
         r_pin[k] = -1
     return incidences, n_inc
@@ -1654,7 +1637,7 @@ def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_in
         r_group[k] = gg[k]
     norm_dir = _edge_direction(geometry.vertices, geometry.edges, extra, -1)
     for sigma in (1.0, -1.0):
-        n_inc = _relax(geometry, line, retained, ng, j, norm_dir, sigma, scratch, incidences, n_inc, node)
+        n_inc = _relaxed_arc(geometry, line, retained, ng, j, norm_dir, sigma, scratch, incidences, n_inc, node)
     return _pencils_at_junction(
         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j], extra,
         gk, gid, gg, ng,
@@ -1713,7 +1696,7 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                     r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
                     r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_w, group_v, w
-                    n_inc = _relax(geometry, line, retained, 3, 1, into_v, 1.0, scratch, incidences, n_inc, node)
+                    n_inc = _relaxed_arc(geometry, line, retained, 3, 1, into_v, 1.0, scratch, incidences, n_inc, node)
                     r_pin[1] = -1
                     r_pin[2] = -1
     return incidences, n_inc
@@ -1809,7 +1792,9 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                         r_kind[0], r_id[0], r_group[0] = GEN_EDGE, f, g
                         r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
                         r_kind[2], r_id[2], r_group[2] = GEN_EDGE, e, g
-                        n_inc = _relax(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
+                        n_inc = _relaxed_arc(
+                            geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node
+                        )
                         r_pin[1] = -1
     return incidences, n_inc
 
@@ -1851,7 +1836,9 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
                 r_kind[2], r_id[2], r_group[2] = GEN_EDGE, gid[sliding], gg[sliding]
                 norm_dir = _edge_direction(vertices, edges, gid[sliding], -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relax(geometry, line, retained, 3, 2, norm_dir, sigma, scratch, incidences, n_inc, node)
+                    n_inc = _relaxed_arc(
+                        geometry, line, retained, 3, 2, norm_dir, sigma, scratch, incidences, n_inc, node
+                    )
     return incidences, n_inc
 
 
@@ -2539,7 +2526,7 @@ def _validate_chunk(
                         norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                         first_row = n_inc
                         for sigma in (1.0, -1.0):
-                            n_inc = _relax(
+                            n_inc = _relaxed_arc(
                                 geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
                                 node,
                             )  # fmt: skip
@@ -2601,14 +2588,16 @@ def _validate_chunk(
                 r_group[k] = gg[k]
             norm_dir = _edge_direction(vertices, edges, gid[lone], -1)
             for sigma in (1.0, -1.0):
-                n_inc = _relax(geometry, line, retained, 3, lone, norm_dir, sigma, scratch, incidences, n_inc, node)
+                n_inc = _relaxed_arc(
+                    geometry, line, retained, 3, lone, norm_dir, sigma, scratch, incidences, n_inc, node
+                )
             # and the pencil of the plane about the third edge's point, its contacts sliding off the crossing
             pair_low = 1 if lone == 0 else 0
             if gid[3 - lone - pair_low] < gid[pair_low]:
                 pair_low = 3 - lone - pair_low
             norm_dir = _edge_direction(vertices, edges, gid[pair_low], -1)
             for sigma in (1.0, -1.0):
-                n_inc = _relax(
+                n_inc = _relaxed_arc(
                     geometry, line, retained, 3, pair_low, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
             incidences, n_inc = _pencils_over_plane_edges(
@@ -2633,7 +2622,7 @@ def _validate_chunk(
                     continue
                 norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
-                    n_inc = _relax(
+                    n_inc = _relaxed_arc(
                         geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
                     )
             else:
@@ -2658,7 +2647,7 @@ def _validate_chunk(
                             norm = n_retained
                         n_retained += 1
                     norm_dir = _edge_direction(vertices, edges, e, v)
-                    n_inc = _relax(
+                    n_inc = _relaxed_arc(
                         geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
                     )
         # at a flat polygon's corner, the arcs whose lines all lie in its plane slide over the polygon: it is no
