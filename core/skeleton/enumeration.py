@@ -1720,9 +1720,12 @@ def _vertex_candidates(
                 nf = np.sqrt(pf0 * pf0 + pf1 * pf1 + pf2 * pf2)
                 for y in range(x + 1, g1):
                     ry = order[y]
+                    # the sub-cells first: most pairs share none, and the test reads no other row
+                    if bits[rx] & bits[ry] == 0:
+                        continue
                     sg = tgts[ry]
                     g = ids[sg]
-                    if f == g or _share_vertex(edges, f, g) or bits[rx] & bits[ry] == 0:
+                    if f == g or _share_vertex(edges, f, g):
                         continue
                     if _off_plane(unit, ends, p, sf, sg, reach) or _off_plane(unit, ends, p, sg, sf, reach):
                         continue
@@ -2259,6 +2262,8 @@ def _edge_candidates(
                         and (behind_after if sides[rx] == 0 else g1 - yi - 1 - behind_after) == 0
                     ):
                         break
+                    if bits[rx] & bits[ry] == 0:
+                        continue
                     sy = tgts[ry]
                     fy = ids[sy]
                     if fy == fx or _share_vertex(edges, fx, fy):
@@ -2266,8 +2271,6 @@ def _edge_candidates(
                     # beside x on its side, y would be with x the two generators of the side holding two, both
                     # below e (ids increase along the group): no line of such a pair is kept (see below)
                     if sides[ry] == sides[rx] and fy < e:
-                        continue
-                    if bits[rx] & bits[ry] == 0:
                         continue
                     if bounded:
                         height = p0 * rel[sy, 0] + p1 * rel[sy, 1] + p2 * rel[sy, 2]
