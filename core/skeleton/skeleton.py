@@ -824,7 +824,7 @@ def _merged_within(scene: Scene, nodes: NodeChunk, incidences: IncidenceChunk, e
 
 @njit(cache=True)
 def _not_repeated(node, n_nodes, kind, codes, direction, s, edge_tol, n_vertices):
-    """(M,) bool: the incidences (node (M,) int32 in 0..n_nodes, kind (M,) int8, codes (M, 3), direction (M,)
+    """(M,) bool: the incidences (node (M,) int32 ids below n_nodes, kind (M,) int8, codes (M, 3), direction (M,)
     int8, s (M,) float64) that do not repeat one of their node's. Sorted by node, kind, codes, direction, then
     s (ties in index order, NaN last: np.lexsort's order), an incidence repeats the one before it when all but
     s agree and s is within edge_tol (E,) of it on their parameter edge (the lowest edge code - n_vertices).
