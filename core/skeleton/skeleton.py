@@ -30,7 +30,7 @@ from ..raycast import CONTACT_EDGE, CONTACT_VERTEX, _perpendicular_frame, first_
 from ..scene import EDGE_FLAT, VERTEX_SILHOUETTE, Scene
 from ..visibility import exact_form_factors
 from .candidates import NodeCandidates
-from .graph import Arcs, assemble_arcs, coincident_nodes
+from .graph import _INSERTION_RUN, Arcs, _before, assemble_arcs, coincident_nodes
 from .topology import scene_topology
 from .validation import (
     ARC_EV,
@@ -845,7 +845,7 @@ def _not_repeated(node, n_nodes, kind, codes, direction, s, edge_tol, n_vertices
     for k in range(n_nodes):
         lo = first[k]
         hi = first[k + 1]
-        if hi - lo > _INSERTION_ROWS:
+        if hi - lo > _INSERTION_RUN:
             rows = order[lo:hi]
             rows = rows[np.argsort(s[rows], kind="mergesort")]
             rows = rows[np.argsort(direction[rows], kind="mergesort")]
@@ -876,10 +876,6 @@ def _not_repeated(node, n_nodes, kind, codes, direction, s, edge_tol, n_vertices
     return kept
 
 
-#: most incidences of one node sorted by insertion (quadratic); more by stable sorts
-_INSERTION_ROWS = 32
-
-
 @njit(cache=True)
 def _incidence_before(a, b, kind, codes, direction, s):
     """Whether incidence a sorts strictly before b by kind, codes, direction, then s (NaN last)."""
@@ -890,7 +886,7 @@ def _incidence_before(a, b, kind, codes, direction, s):
             return codes[a, c] < codes[b, c]
     if direction[a] != direction[b]:
         return direction[a] < direction[b]
-    return s[a] < s[b] or (s[b] != s[b] and s[a] == s[a])
+    return _before(s[a], s[b])
 
 
 @njit(cache=True)

@@ -1030,13 +1030,14 @@ def test_repeated_incidences_are_those_lexsort_finds():
     """The incidences a chunk's merged nodes repeat are those found by sorting them all with np.lexsort: with
     tied and NaN coordinates, chains of coordinates each within the tolerance of the one before, and nodes of
     fewer and more incidences than an insertion sort takes."""
-    from core.skeleton.skeleton import _INSERTION_ROWS, _not_repeated
+    from core.skeleton.graph import _INSERTION_RUN
+    from core.skeleton.skeleton import _not_repeated
 
     rng = np.random.default_rng(5)
     n_vertices = 4
     edge_tol = np.array([0.1, 0.2, 0.05, 0.3])
     count = 30000
-    sizes = np.concatenate([rng.integers(1, 9, 3000), [_INSERTION_ROWS, _INSERTION_ROWS + 1, 400, 2000]])
+    sizes = np.concatenate([rng.integers(1, 9, 3000), [_INSERTION_RUN, _INSERTION_RUN + 1, 400, 2000]])
     node = np.repeat(np.arange(len(sizes)), sizes)[:count].astype(np.int32)
     rng.shuffle(node)
     count = len(node)
