@@ -1448,6 +1448,15 @@ def _met_before(line, corner_element, offsets, g, i, contact_kind, element):
     return False
 
 
+@njit_leaf
+def _other_corner_at(line, corner_vertex, offsets, v, g):
+    """Whether group g of the line, holding vertex v, meets another vertex there (objects corner to corner)."""
+    for i in range(line.g_lo[g], line.g_hi[g]):
+        if line.c_kind[i] == CONTACT_VERTEX and corner_vertex[offsets[line.c_poly[i]] + line.c_local[i]] != v:
+            return True
+    return False
+
+
 @njit(cache=True)
 def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
                    tau_w, gk, gid, ng):  # fmt: skip
@@ -1519,7 +1528,7 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
         if turn == 0.0:
             continue
         wedge = _along(into, _dot(_cross(u, into), normal) / turn, across_extra)
-        if _faces_meet_in(g_, e_v, extra, _row(g_.vertices, v), wedge, _over(normal, length)):
+        if _sliding_faces_meet_in(g_, line, _row(g_.vertices, v), wedge, _over(normal, length)):
             continue
         for k in range(ng):
             if gk[k] != GEN_EDGE:
@@ -1682,9 +1691,10 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                 # edges along each other span no plane; lines off the plane are no pencil of it
                 if length <= g_.angle_tol or abs(_dot(normal, u)) > g_.angle_tol * length:
                     continue
-                # the lines run between their contacts within the angle of the two edges at the corner: where the
-                # objects touch there face against face, such lines are inside the solids
-                if _faces_meet_in(g_, e_v, e_w, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
+                # the lines run between their contacts within the angle of the two edges at the corner: where two
+                # objects touch there face against face (those of the edges, or a third one's face under both: a
+                # box stacked on another, its corner on the other's edge), such lines are inside the solids
+                if _sliding_faces_meet_in(g_, line, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
                     continue
                 for k in range(ng):
                     if gk[k] != GEN_EDGE or \
@@ -1843,18 +1853,18 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
 
 
 @njit_leaf
-def _faces_meet_in(geometry, e, f, point, direction, normal):
-    """Whether a face of edge e and a face of edge f, both in the plane of unit `normal` and facing each other,
-    both hold the points just off `point` (on both edges) along `direction` (in that plane)."""
+def _sliding_faces_meet_in(geometry, line, point, direction, normal):
+    """Whether two faces the line slides over, in the plane of unit `normal` and facing each other, both hold the
+    points just off `point` along `direction` (in that plane): objects pressed together there."""
     g_ = geometry
     points, offsets, normals = g_.points, g_.offsets, g_.normals
-    for i in range(g_.ef_off[e], g_.ef_off[e + 1]):
-        a = g_.ef_face[i]
+    for k in range(line.n_sliding):
+        a = line.sl_poly[k]
         if abs(_dot(_row(normals, a), normal)) < 1.0 - g_.angle_tol or \
                 not _inside_to_first_order(points, offsets, normals, a, point, direction, g_.tol, True):  # fmt: skip
             continue
-        for k in range(g_.ef_off[f], g_.ef_off[f + 1]):
-            b = g_.ef_face[k]
+        for m in range(k + 1, line.n_sliding):
+            b = line.sl_poly[m]
             if _dot(_row(normals, a), _row(normals, b)) <= -1.0 + g_.angle_tol and \
                     _inside_to_first_order(points, offsets, normals, b, point, direction, g_.tol, True):  # fmt: skip
                 return True
@@ -2438,8 +2448,15 @@ def _validate_chunk(
                     gk, gid, gg, ng,
                 )  # fmt: skip
         # the other swaths through a junction's line (the lines through its vertex meeting the other edge) pass
-        # it: no node ends them there
+        # it: no node ends them there, but the pencils of a corner of another object at the vertex's point
+        # (_pencils_at_shared_corner) do: the nodes through either vertex are this line
         if junction:
+            for j in range(ng):
+                if gk[j] == GEN_VERTEX and _other_corner_at(line, corner_vertex, offsets, gid[j], gg[j]):
+                    incidences, n_inc = _pencils_at_shared_corner(
+                        geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
+                        ve_edge, gid[j], gg[j], gk, gid, gg, ng,
+                    )  # fmt: skip
             continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
@@ -2464,12 +2481,7 @@ def _validate_chunk(
                     )  # fmt: skip
             # the call counts a reference to each of the dozens of arrays it is passed: made only where another
             # vertex is met at v's point, which few corners are
-            other_corner = False
-            for i in range(g_lo[gg[j]], g_hi[gg[j]]):
-                if c_kind[i] == CONTACT_VERTEX and corner_vertex[offsets[c_poly[i]] + c_local[i]] != v:
-                    other_corner = True
-                    break
-            if other_corner:
+            if _other_corner_at(line, corner_vertex, offsets, v, gg[j]):
                 incidences, n_inc = _pencils_at_shared_corner(
                     geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
                     ve_edge, v, gg[j], gk, gid, gg, ng,

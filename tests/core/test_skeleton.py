@@ -645,6 +645,39 @@ def test_pencil_arcs_end_where_two_objects_touch_corner_to_corner():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
+def test_pencil_arcs_end_where_corners_meet_on_the_edge_of_a_third_box():
+    """bench closed_furnished_room(1) cut down to six boxes: a box stands on a lower one, flush with its back face;
+    a third floats beside the lower one, its bottom in the top's plane, its bottom corner at the upper box's
+    bottom corner, both on the lower box's back top edge. The lines of that plane through the point where a far
+    box's vertical edge pierces it, crossing the upper box's bottom edge along that top edge and the floating
+    box's bottom edge (EEE arcs), end on the line through the corners and the piercing point: that line is a
+    T-junction's (a corner inside the top edge), whose node now ends the pencils of the two corners as well (3
+    arcs dangled). At the upper box's other bottom corner on the lower box's front top edge, a box standing beside
+    it on the lower one has a bottom corner too: the pencils of those two corners run between the lower box's top
+    and the upper box's bottom, pressed together, and are no arc (made at junction lines too, they dangled)."""
+    skeleton = build_skeleton(boxes_in_room(
+        [((3.0, 2.2, 0.0), (3.95, 2.65, 0.45)), ((3.25, 2.2, 0.45), (3.45, 2.65, 1.0)),
+         ((3.45, 2.2, 0.45), (4.0, 2.5, 1.0)), ((3.25, 2.65, 0.45), (4.15, 3.3, 0.8)),
+         ((2.0, 4.85, 0.25), (2.55, 5.15, 0.85)), ((1.65, 0.3, 0.3), (2.05, 0.7, 0.5))],
+        size=(4.55, 5.85, 2.5),
+    ))  # fmt: skip
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
+def test_no_pencil_arcs_between_stacked_boxes_from_a_t_junction():
+    """bench closed_furnished_room(29) cut down to four boxes: a box stands on a lower one of the same footprint,
+    beside a third as high as the lower one, the lower box's top corner on the third's top edge (a T-junction).
+    The lines of the top plane through the point where a far box's vertical edge pierces it, crossing the lower
+    box's top edge and the third's from that corner, run between the lower box and the upper one, pressed
+    together: no arc, though neither edge's own faces tell (such arcs had no other end: 6 dangled)."""
+    skeleton = build_skeleton(boxes_in_room(
+        [((1.1, 1.6, 0.0), (1.5, 1.9, 0.15)), ((1.1, 1.6, 0.15), (1.5, 1.9, 0.75)),
+         ((0.75, 1.6, 0.0), (1.1, 2.45, 0.15)), ((1.55, 3.0, 0.1), (1.95, 3.4, 0.55))],
+        size=(3.15, 4.5, 2.8),
+    ))  # fmt: skip
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
 def test_arcs_along_a_seam_end_at_a_corner_on_it():
     """Two boxes side by side and a lower one against both (office-432's crates): the lower box's top corner lies
     on the seam of the two others' collinear vertical edges. The lines through a vertex meeting either edge of
