@@ -16,6 +16,8 @@ one-source lazy build at least 5x faster than the full build there.
                              [--progress]
     python -m bench skeleton --furnished 200      # issue 3: generated rooms without exception, NaN, dangling arc,
                                                   # their vertex views closed and summing to 1
+    python -m bench skeleton --closed 30          # the denser closed rooms of bench.scenes (16 boxes): the same
+                                                  # tallies of the builds, dangling arcs room by room
 """
 
 import argparse
@@ -28,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .common import Stopwatch, peak_memory_bytes, print_table, write_results
-from .scenes import OFFICE_SIZES, SCENES
+from .scenes import OFFICE_SIZES, SCENES, closed_furnished_room
 
 #: seed 003, Table 1: polygons -> (construction seconds, memory MB, nodes x 1000, arcs x 1000)
 PAPER_TABLE_1 = {
@@ -301,6 +303,40 @@ def furnished_rooms(build_skeleton, count: int) -> dict:
     }
 
 
+def closed_rooms(build_skeleton, count: int) -> dict:
+    """Build `bench.scenes.closed_furnished_room(seed)` for the first `count` seeds (16 boxes on a 5 cm grid:
+    denser than the furnished rooms, with more corners meeting on edges and at corners of other boxes) and
+    tally exceptions, NaN and dangling arcs, the last room by room."""
+    failed, with_nan, dangling = {}, [], {}
+    seconds, arcs = [], 0
+    for seed in range(count):
+        start = time.perf_counter()
+        try:
+            skeleton = build_skeleton(closed_furnished_room(seed).build())
+        except Exception as error:  # noqa: BLE001 -- every failure is what this check counts
+            failed[seed] = f"{type(error).__name__}: {error}"
+            continue
+        seconds.append(time.perf_counter() - start)
+        arcs += len(skeleton.arcs)
+        linked = skeleton.arcs.node >= 0
+        finite = np.isfinite(skeleton.nodes.start).all() and np.isfinite(skeleton.nodes.direction).all()
+        if not (finite and np.isfinite(skeleton.arcs.s[linked]).all()):
+            with_nan.append(seed)
+        if skeleton.stats["dangling_arcs"]:
+            dangling[seed] = skeleton.stats["dangling_arcs"]
+    return {
+        "rooms": count,
+        "exceptions": len(failed),
+        "with_nan": len(with_nan),
+        "arcs_total": arcs,
+        "rooms_with_dangling_arcs": len(dangling),
+        "dangling_arcs_total": int(sum(dangling.values())),
+        "seconds_mean": float(np.mean(seconds)) if seconds else float("nan"),
+        "failed": failed,
+        "dangling": dangling,
+    }
+
+
 def _views_in_room(scene, skeleton) -> tuple[int, int, float]:
     """(queries, refused, worst |sum - 1|): every vertex's view of every polygon, with one polygon using the
     vertex as receiver (whether a view closes does not depend on the receiver), and at the free convex corners
@@ -355,6 +391,9 @@ def main(argv) -> int:
     parser.add_argument("--furnished", type=int, default=0, metavar="N",
                         help="instead: build N generated furnished rooms, count exceptions, NaN, dangling arcs, "
                              "refused vertex views, and the worst sum of form factors off 1")
+    parser.add_argument("--closed", type=int, default=0, metavar="N",
+                        help="instead: build the first N closed rooms of bench.scenes.closed_furnished_room, count "
+                             "exceptions, NaN and dangling arcs")
     args = parser.parse_args(argv)
     sizes = list(OFFICE_SIZES[:3]) if args.quick else args.sizes
 
@@ -377,6 +416,17 @@ def main(argv) -> int:
         for seed, message in report["failed"].items():
             print(f"  room {seed}: {message}")
         write_results("skeleton-furnished", [report])
+        return 0
+
+    if args.closed > 0:
+        report = closed_rooms(build_skeleton, args.closed)
+        print_table([report], ["rooms", "exceptions", "with_nan", "arcs_total", "rooms_with_dangling_arcs",
+                               "dangling_arcs_total", "seconds_mean"],
+                    title="Closed rooms of bench.scenes.closed_furnished_room (16 boxes)")
+        for seed, message in report["failed"].items():
+            print(f"  room {seed}: {message}")
+        print("  dangling arcs by room:", ", ".join(f"{seed}: {n}" for seed, n in report["dangling"].items()) or "none")
+        write_results("skeleton-closed", [report])
         return 0
 
     started = time.perf_counter()
