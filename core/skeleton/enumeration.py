@@ -2617,15 +2617,13 @@ def _junction_candidates(
     tol, angle_tol,
 ):  # fmt: skip
     """VEE candidates through a masked vertex v lying inside a masked edge `extra` of another element (a box's
-    corner on the edge of a box beside or under it: a T-junction), or at an end of it (another element's corner
-    at v's point: objects touching corner to corner), and the point P where a masked edge g strictly crosses
-    the plane of `extra` and an edge of v: the line v P, with edges (g, extra).
+    corner on the edge of a box beside or under it: a T-junction) and the point P where a masked edge g strictly
+    crosses the plane of `extra` and an edge of v: the line v P, with edges (g, extra).
 
     The lines of that plane through P meeting `extra` and v's edge turn at v P (their contact on v's edge
     reaches v): that line ends their pencil, as an FXE line ends the pencils through a crossing of two edges'
     interiors. v lies on `extra`, so the double wedges of _vertex_candidates propose nothing here; validation
-    takes the vertex on `extra` for the junction it is (its pencils: validation._pencils_at_junction and, at a
-    corner, validation._pencils_at_shared_corner)."""
+    takes the vertex on `extra` for the junction it is (its pencils: validation._pencils_at_junction)."""
     out = _new_output(16)
     count = 0
     vertex_ids = np.flatnonzero(vmask)
@@ -2647,7 +2645,7 @@ def _junction_candidates(
             if len_extra <= tol:
                 continue
             along = _dot(w - a, b - a) / len_extra
-            if along < -tol or along > len_extra + tol or _norm(w - a - along * (b - a) / len_extra) > tol:
+            if not tol < along < len_extra - tol or _norm(w - a - along * (b - a) / len_extra) > tol:
                 continue
             for slot in range(ve_off[v], ve_off[v + 1]):
                 e_v = ve_edge[slot]

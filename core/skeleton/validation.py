@@ -1449,19 +1449,8 @@ def _met_before(line, corner_element, offsets, g, i, contact_kind, element):
 
 
 @njit_leaf
-def _edge_ends_in_group(c_poly, c_kind, c_local, lo, hi, offsets, corner_vertex, edges, e, v):
-    """Whether the contacts lo..hi (one group of a line) meet an end of edge e other than vertex v."""
-    for i in range(lo, hi):
-        if c_kind[i] == CONTACT_VERTEX:
-            w = corner_vertex[offsets[c_poly[i]] + c_local[i]]
-            if w != v and (edges[e, 0] == w or edges[e, 1] == w):
-                return True
-    return False
-
-
-@njit_leaf
 def _other_corner_at(line, corner_vertex, offsets, v, g):
-    """Whether group g of the line meets a vertex other than v there (v = -1: any; objects corner to corner)."""
+    """Whether group g of the line, holding vertex v, meets another vertex there (objects corner to corner)."""
     for i in range(line.g_lo[g], line.g_hi[g]):
         if line.c_kind[i] == CONTACT_VERTEX and corner_vertex[offsets[line.c_poly[i]] + line.c_local[i]] != v:
             return True
@@ -1707,10 +1696,8 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                 # box stacked on another, its corner on the other's edge), such lines are inside the solids
                 if _sliding_faces_meet_in(g_, line, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
                     continue
-                # about an edge piercing the plane at another element's vertex (a box's bottom corner on the edge
-                # of a box beside it), the lines are that vertex's: its EV arcs name them (simplest configuration)
                 for k in range(ng):
-                    if gk[k] != GEN_EDGE or _other_corner_at(line, corner_vertex, offsets, -1, gg[k]) or \
+                    if gk[k] != GEN_EDGE or \
                             abs(_dot(_edge_direction(vertices, edges, gid[k], -1), normal)) <= g_.angle_tol * length:
                         continue
                     if n_inc + 1 > incidences.node.shape[0]:
@@ -1966,26 +1953,6 @@ def _generator_met(points, offsets, normals, plane_offsets, corner_vertex, corne
         contact, _, local = _polygon_contact(points, offsets, normals, plane_offsets, poly, start, end, tol)
         if contact == wanted and corner_ids[offsets[poly] + local] == gid:
             return True
-    return False
-
-
-@njit_leaf
-def _corner_met(points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off, ef_face,
-                vertices, edges, gk, gid, ng, e, start, end, tol):  # fmt: skip
-    """Whether the segment start-end (3,) touches an end of edge e lying at the point of a vertex generator
-    (gk, gid: ng of them) other than that end: another element's corner met there (objects touching corner to
-    corner), which meets the edge as well."""
-    for k in range(ng):
-        if gk[k] != GEN_VERTEX:
-            continue
-        for end_of_e in range(2):
-            w = edges[e, end_of_e]
-            gap = _minus(_row(vertices, w), _row(vertices, gid[k]))
-            if w != gid[k] and _dot(gap, gap) <= tol * tol and _generator_met(
-                points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off, ef_face,
-                GEN_VERTEX, w, start, end, tol,
-            ):  # fmt: skip
-                return True
     return False
 
 
@@ -2261,10 +2228,7 @@ def _validate_chunk(
                 gk[j], gid[j], segment_start, segment_end, tol,
             ) and not (gk[j] == GEN_VERTEX and np.isfinite(_flat_vertex_tau(
                 vertices, normals, plane_offsets, vf_off, vf_face, gid[j], segment_start, u, tol, angle_tol
-            ))) and not (gk[j] == GEN_EDGE and _corner_met(
-                points, offsets, normals, plane_offsets, corner_vertex, corner_edge, vf_off, vf_face, ef_off, ef_face,
-                vertices, edges, gk, gid, ng, gid[j], segment_start, segment_end, tol,
-            )):  # fmt: skip
+            ))):  # fmt: skip
                 missing = True
                 break
         if missing:
@@ -2359,15 +2323,6 @@ def _validate_chunk(
                 if gg[k] >= at:
                     gg[k] += 1
             gg[j] = at
-        # an edge of another element's corner at a vertex generator's point (objects touching corner to corner,
-        # a candidate of enumeration._junction_candidates) is met at that corner: a vertex contact
-        for j in range(ng):
-            if gg[j] < 0 and gk[j] == GEN_EDGE:
-                for k in range(ng):
-                    if gk[k] == GEN_VERTEX and gg[k] >= 0 and _edge_ends_in_group(
-                        c_poly, c_kind, c_local, g_lo[gg[k]], g_hi[gg[k]], offsets, corner_vertex, edges, gid[j], gid[k]
-                    ):  # fmt: skip
-                        gg[j] = gg[k]
         missing = False
         for j in range(ng):
             if gg[j] < 0:
@@ -2472,19 +2427,9 @@ def _validate_chunk(
         # a vertex generator lying on another element's edge (a box's corner on the room's floor edge, on the
         # top edge of the box it stands on, on the collinear edge of a box beside it): the arcs along that edge
         # through the vertex's point start or end here as well, so the vertex is replaced by the edge, sliding
-        # either way. Each such edge: the vertex may lie on a seam of collinear edges of boxes side by side. Not on
-        # a line through a corner of another element at the vertex's point, an edge of that corner a generator
-        # (enumeration._junction_candidates): such a line ends that corner's pencils only (below), and the
-        # lines kept on that edge would be kept on its end
-        corner_line = False
+        # either way. Each such edge: the vertex may lie on a seam of collinear edges of boxes side by side
         for j in range(ng):
-            for k in range(ng):
-                if gk[j] == GEN_VERTEX and gk[k] == GEN_EDGE and gg[k] == gg[j] and \
-                        _edge_ends_in_group(c_poly, c_kind, c_local, g_lo[gg[j]], g_hi[gg[j]], offsets, corner_vertex,
-                                            edges, gid[k], gid[j]):  # fmt: skip
-                    corner_line = True
-        for j in range(ng):
-            if ng > 3 or gk[j] != GEN_VERTEX or corner_line:
+            if ng > 3 or gk[j] != GEN_VERTEX:
                 continue
             g = gg[j]
             for i in range(g_lo[g], g_hi[g]):

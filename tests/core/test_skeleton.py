@@ -664,37 +664,6 @@ def test_pencil_arcs_end_where_corners_meet_on_the_edge_of_a_third_box():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
-def test_pencil_arcs_end_where_corners_of_three_boxes_meet():
-    """bench closed_furnished_room(24) cut down to four boxes: a box stands on a lower one of the same footprint; a
-    third floats beside the upper one, its bottom in the lower one's top plane, a bottom corner at the corner of
-    the other two. The lines of that plane through the point where a far box's vertical edge pierces it,
-    crossing the floating box's bottom edge from that corner and the lower box's top edge (EEE arcs), end on
-    the line through the corner and the piercing point. No edge runs through the corner, so no candidate
-    proposed that line (6 arcs dangled): it is proposed with an edge of another box's corner there, met at its
-    end."""
-    skeleton = build_skeleton(boxes_in_room(
-        [((2.95, 0.3, 0.0), (3.55, 0.95, 0.6)), ((2.95, 0.3, 0.6), (3.55, 0.95, 1.05)),
-         ((2.95, 0.95, 0.6), (3.5, 1.5, 1.05)), ((0.45, 3.15, 0.5), (1.25, 3.5, 0.8))],
-        size=(4.0, 4.2, 2.85),
-    ))  # fmt: skip
-    assert skeleton.stats["dangling_arcs"] == 0
-
-
-def test_pencils_about_a_vertex_are_its_arcs():
-    """bench closed_furnished_room(29) cut down to three boxes: a box stands on a lower one of the same footprint,
-    beside a third as high as the lower one whose bottom edge runs through the lower box's bottom corner. The
-    lines of the upper and lower boxes' common side plane through that corner, crossing the upper box's vertical
-    edge and the lower box's top edge from their common corner, are the EV arcs of the bottom corner: the line
-    through both corners, proposed with the third box's edge through the bottom corner, makes no EEE pencil of
-    them about that edge (it had no other end: 1 dangled)."""
-    skeleton = build_skeleton(boxes_in_room(
-        [((1.1, 1.6, 0.0), (1.5, 1.9, 0.15)), ((1.1, 1.6, 0.15), (1.5, 1.9, 0.75)),
-         ((1.1, 1.0, 0.0), (1.75, 1.6, 0.15))],
-        size=(3.15, 4.5, 2.8),
-    ))  # fmt: skip
-    assert skeleton.stats["dangling_arcs"] == 0
-
-
 def test_no_pencil_arcs_between_stacked_boxes_from_a_t_junction():
     """bench closed_furnished_room(29) cut down to four boxes: a box stands on a lower one of the same footprint,
     beside a third as high as the lower one, the lower box's top corner on the third's top edge (a T-junction).
