@@ -271,9 +271,7 @@ def furnished_rooms(build_skeleton, count: int) -> dict:
             failed[seed] = f"{type(error).__name__}: {error}"
             continue
         seconds.append(time.perf_counter() - start)
-        linked = skeleton.arcs.node >= 0
-        finite = np.isfinite(skeleton.nodes.start).all() and np.isfinite(skeleton.nodes.direction).all()
-        if not (finite and np.isfinite(skeleton.arcs.s[linked]).all()):
+        if _has_nan(skeleton):
             with_nan.append(seed)
         if skeleton.stats["dangling_arcs"]:
             dangling[seed] = skeleton.stats["dangling_arcs"]
@@ -303,6 +301,13 @@ def furnished_rooms(build_skeleton, count: int) -> dict:
     }
 
 
+def _has_nan(skeleton) -> bool:
+    """Whether a node's line or a linked arc end's coordinate is not finite."""
+    linked = skeleton.arcs.node >= 0
+    finite = np.isfinite(skeleton.nodes.start).all() and np.isfinite(skeleton.nodes.direction).all()
+    return not (finite and np.isfinite(skeleton.arcs.s[linked]).all())
+
+
 def closed_rooms(build_skeleton, count: int) -> dict:
     """Build `bench.scenes.closed_furnished_room(seed)` for the first `count` seeds (16 boxes on a 5 cm grid:
     denser than the furnished rooms, with more corners meeting on edges and at corners of other boxes) and
@@ -318,9 +323,7 @@ def closed_rooms(build_skeleton, count: int) -> dict:
             continue
         seconds.append(time.perf_counter() - start)
         arcs += len(skeleton.arcs)
-        linked = skeleton.arcs.node >= 0
-        finite = np.isfinite(skeleton.nodes.start).all() and np.isfinite(skeleton.nodes.direction).all()
-        if not (finite and np.isfinite(skeleton.arcs.s[linked]).all()):
+        if _has_nan(skeleton):
             with_nan.append(seed)
         if skeleton.stats["dangling_arcs"]:
             dangling[seed] = skeleton.stats["dangling_arcs"]
