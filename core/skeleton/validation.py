@@ -511,6 +511,37 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
 
 
 @njit_leaf
+def _pressed_between_contacts(points, offsets, normals, vertices, edges, object_ids, sl_poly, n_sliding, in_plane,
+                              crossing, delta, edge_a, edge_b, f1, f2, angle_tol, tol):  # fmt: skip
+    """Whether lines moved by the small 3-vector `delta` (across the line, frame f1, f2) off the point `crossing`
+    of edges edge_a and edge_b, meeting both, run between their two contacts through the inside of two faces of
+    different objects facing each other whose plane holds them (sl_poly[:n_sliding], where in_plane): objects
+    in contact, the lines inside them. Each contact moves along its edge by the part of delta across the line
+    that the edge gives (_relaxed_arc's slide); the point halfway between them is tested to first order."""
+    halfway = (0.0, 0.0, 0.0)
+    for edge in (edge_a, edge_b):
+        d = _edge_direction(vertices, edges, edge, -1)
+        w1 = _dot(d, f1)
+        w2 = _dot(d, f2)
+        if w1 * w1 + w2 * w2 <= 1e-24:
+            return False
+        slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
+        halfway = _along(halfway, 0.5 * slide, d)
+    for k in range(n_sliding):
+        if not in_plane[k]:
+            continue
+        for m in range(k + 1, n_sliding):
+            if not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
+                continue
+            if _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) > -1.0 + angle_tol:
+                continue
+            if _inside_to_first_order(points, offsets, normals, sl_poly[k], crossing, halfway, tol, False) and \
+                    _inside_to_first_order(points, offsets, normals, sl_poly[m], crossing, halfway, tol, False):
+                return True
+    return False
+
+
+@njit_leaf
 def _solve4(a, b, x):
     """Solve the 4x4 system a x = b by Gaussian elimination with partial pivoting, in place: a (4, 4) and b (4,)
     float64 are overwritten, x (4,) float64 receives the solution. Returns whether the system is regular."""
@@ -1006,6 +1037,17 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
         if _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u,
                        alpha, beta, g_tau[first], g_tau[last], diag, angle_tol, tol):  # fmt: skip
             return n_inc
+        # a pencil's contacts on the norm edge and its partner part from their crossing: between them its lines
+        # may run inside two facing faces of touching objects, which the node's line only reaches at that point
+        if pencil >= 0:
+            crossing_tau = g_tau[r_group[norm_index]]
+            tn = crossing_tau / diag
+            if _pressed_between_contacts(
+                points, offsets, normals, vertices, edges, object_ids, sl_poly, n_sliding, in_plane,
+                _along(start, crossing_tau, u), _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2),
+                r_id[norm_index], r_id[norm_partner], f1, f2, angle_tol, tol,
+            ):  # fmt: skip
+                return n_inc
 
     # a face whose plane held the line is crossed where the displacement leaves its plane, if inside it
     before_tau = -np.inf
@@ -1263,6 +1305,14 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                         points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start,
                         arc_len, bounds,
                     )  # fmt: skip
+                    # towards the other generators they may go into the other object (a box's top edge flush with
+                    # the bottom edge of the box stacked on it, the lines coming down through the upper box): they
+                    # run inside it between the generators, entering and leaving at edges, no face crossed
+                    if blocked and _goes_into_solid(
+                        points, offsets, normals, object_ids, corner_edge, element_solid, vertices.shape[0], polys,
+                        kinds, locals_, count, tilted if g == first else _negated(tilted), angle_tol, angles,
+                    ):  # fmt: skip
+                        return n_inc
         else:
             for i in range(g_lo[g], g_hi[g]):
                 hit, _ = _displaced_hit(points, offsets, normals, c_poly[i], c_kind[i], c_local[i], delta, u, angle_tol)

@@ -678,6 +678,58 @@ def test_no_pencil_arcs_between_stacked_boxes_from_a_t_junction():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
+def _edges_between(scene: Scene, a, b) -> list[int]:
+    """The ids of the scene edges from point a to point b (either way round; flush boxes share such lines)."""
+    ends = scene.vertices[scene.edges]
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    forward = np.abs(ends - np.stack([a, b])).max(axis=(1, 2)) < 1e-9
+    backward = np.abs(ends - np.stack([b, a])).max(axis=(1, 2)) < 1e-9
+    return np.flatnonzero(forward | backward).tolist()
+
+
+def test_no_swath_through_the_upper_of_two_stacked_boxes_from_a_flush_edge():
+    """bench closed_furnished_room(7) cut down to three boxes: a box stacked flush on a lower one, a third box
+    against the upper one's front face, its vertical edge crossing that face's top edge. The lines through that
+    crossing meeting the lower box's top edge (flush with the upper box's bottom edge) come down through the
+    upper box, entering and leaving it at edges: no arc (its one node was the line in the front face's plane
+    through the lower box's top corner, and the arc dangled)."""
+    scene = boxes_in_room(
+        [((0.0, 4.3, 0.0), (0.4, 4.75, 0.8)), ((0.0, 4.3, 0.8), (0.4, 4.75, 1.15)),
+         ((0.0, 4.05, 0.8), (0.25, 4.3, 1.35))],
+        size=(4.0, 5.0, 2.5),
+    )  # fmt: skip
+    skeleton = build_skeleton(scene)
+    flush = _edges_between(scene, (0.4, 4.3, 0.8), (0.4, 4.75, 0.8))
+    (upper_top,) = _edges_between(scene, (0.0, 4.3, 1.15), (0.4, 4.3, 1.15))
+    (beside,) = _edges_between(scene, (0.25, 4.3, 0.8), (0.25, 4.3, 1.35))
+    assert len(flush) == 2
+    swaths = {frozenset(scene.n_vertices + e for e in (edge, upper_top, beside)) for edge in flush}
+    assert not any(frozenset(codes.tolist()) in swaths for codes in skeleton.arcs.codes)
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
+
+def test_no_pencil_arcs_between_touching_faces_past_a_crossing():
+    """bench closed_furnished_room(25) cut down to three boxes: two boxes touch face to face (a box beside
+    another's side, overlapping it), an edge of each crossing the other's in the contact plane, and a third box's
+    top edge pierces that plane beside them. The pencil about the piercing point whose contacts part from the
+    crossing into the overlap runs between the touching faces: no arc; the pencil parting the other way is one,
+    and ends at a node (the first arc had no other end)."""
+    scene = boxes_in_room(
+        [((0.1, 1.75, 1.3), (0.75, 2.0, 2.15)), ((0.75, 1.45, 1.85), (1.0, 2.4, 2.35)),
+         ((0.6, 1.05, 1.85), (1.0, 1.45, 2.1))],
+        size=(4.0, 4.0, 3.0),
+    )  # fmt: skip
+    skeleton = build_skeleton(scene)
+    (upright,) = _edges_between(scene, (0.75, 1.75, 1.3), (0.75, 1.75, 2.15))
+    (lying,) = _edges_between(scene, (0.75, 1.45, 1.85), (0.75, 2.4, 1.85))
+    (piercing,) = _edges_between(scene, (1.0, 1.45, 2.1), (0.6, 1.45, 2.1))
+    pencil = {scene.n_vertices + e for e in (upright, lying, piercing)}
+    arcs = [k for k, codes in enumerate(skeleton.arcs.codes) if set(codes.tolist()) == pencil]
+    assert len(arcs) == 1
+    assert (skeleton.arcs.node[arcs[0]] >= 0).all()
+    assert skeleton.stats["dangling_arcs"] == 0
+
 def test_arcs_along_a_seam_end_at_a_corner_on_it():
     """Two boxes side by side and a lower one against both (office-432's crates): the lower box's top corner lies
     on the seam of the two others' collinear vertical edges. The lines through a vertex meeting either edge of
