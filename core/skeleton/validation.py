@@ -1282,8 +1282,10 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                 )  # fmt: skip
             # another object's edge collinear with this one (boxes side by side or stacked flush), met here or
             # from its corner here on the side the contact slides to, keeps meeting the lines: its faces close
-            # around them with the edge's own (lines over the seam of two coplanar tops go into the other box)
-            if not blocked and abs(slide) > _SIDE_EPS:
+            # around them with the edge's own (lines over the seam of two coplanar tops go into the other box).
+            # At an outer generator the lines may also come from inside that object, whether or not the edge's
+            # own faces stop them
+            if (not blocked or g == first or g == last) and abs(slide) > _SIDE_EPS:
                 count = 0
                 for i in range(ef_off[r_id[j]], ef_off[r_id[j] + 1]):
                     polys[count] = ef_face[i]
@@ -1301,7 +1303,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
                         locals_[count] = side_local
                         count += 1
                 if count > own:
-                    blocked = _group_blocked(
+                    blocked = blocked or _group_blocked(
                         points, offsets, normals, polys, kinds, locals_, 0, count, tilted, angle_tol, arc_start,
                         arc_len, bounds,
                     )  # fmt: skip

@@ -709,6 +709,25 @@ def test_no_swath_through_the_upper_of_two_stacked_boxes_from_a_flush_edge():
 
 
 
+
+def test_no_swath_through_a_box_standing_flush_beside_the_edge_that_stops_it():
+    """bench closed_furnished_room(22) cut down to three boxes: as above, but the box over the lower one's top
+    edge stands beside it, not on it (flush with that edge), so the lines reaching the edge from the crossing go
+    on into the lower box, which stops them: they still come down through the box beside, entering and leaving
+    it at edges, and are no arc (its one node dangled)."""
+    scene = boxes_in_room(
+        [((2.9, 2.55, 0.0), (3.6, 3.1, 0.9)), ((2.25, 2.55, 0.9), (2.9, 3.2, 1.35)),
+         ((1.9, 1.8, 0.9), (2.85, 2.55, 1.6))],
+        size=(4.0, 4.0, 3.0),
+    )  # fmt: skip
+    skeleton = build_skeleton(scene)
+    (lower_top,) = _edges_between(scene, (2.9, 2.55, 0.9), (2.9, 3.1, 0.9))
+    (beside_top,) = _edges_between(scene, (2.25, 2.55, 1.35), (2.9, 2.55, 1.35))
+    (front,) = _edges_between(scene, (2.85, 2.55, 0.9), (2.85, 2.55, 1.6))
+    swath = {scene.n_vertices + e for e in (lower_top, beside_top, front)}
+    assert not any(set(codes.tolist()) == swath for codes in skeleton.arcs.codes)
+    assert skeleton.stats["dangling_arcs"] == 0
+
 def test_no_pencil_arcs_between_touching_faces_past_a_crossing():
     """bench closed_furnished_room(25) cut down to three boxes: two boxes touch face to face (a box beside
     another's side, overlapping it), an edge of each crossing the other's in the contact plane, and a third box's
