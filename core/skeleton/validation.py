@@ -477,6 +477,15 @@ def _near_sides_on_line(points, offsets, normals, poly, point, u, tol):
 
 
 @njit_leaf
+def _pressed_pair(normals, object_ids, sl_poly, in_plane, k, m, angle_tol):
+    """Whether sliding faces sl_poly[k] and sl_poly[m], both holding the displaced lines (in_plane), belong to
+    different objects and face each other: where both hold a point, the objects touch there."""
+    if not in_plane[k] or not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
+        return False
+    return _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) <= -1.0 + angle_tol
+
+
+@njit_leaf
 def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sliding, in_plane, start, u, alpha, beta,
                 lo, hi, diag, angle_tol, tol):  # fmt: skip
     """Whether the line start + tau u, moved by the displacement alpha + (tau / diag) beta (zero: the line
@@ -485,12 +494,8 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
     hide each other; such lines are inside the solids, blocked (seed 000 section 2.2, touching objects).
     in_plane (n_sliding,) bool: the faces whose plane holds every displaced line."""
     for k in range(n_sliding):
-        if not in_plane[k]:
-            continue
         for m in range(k + 1, n_sliding):
-            if not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
-                continue
-            if _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) > -1.0 + angle_tol:
+            if not _pressed_pair(normals, object_ids, sl_poly, in_plane, k, m, angle_tol):
                 continue
             a = max(max(sl_a[k], sl_a[m]), lo)
             b = min(min(sl_b[k], sl_b[m]), hi)
@@ -528,12 +533,8 @@ def _pressed_between_contacts(points, offsets, normals, vertices, edges, object_
         slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
         halfway = _along(halfway, 0.5 * slide, d)
     for k in range(n_sliding):
-        if not in_plane[k]:
-            continue
         for m in range(k + 1, n_sliding):
-            if not in_plane[m] or object_ids[sl_poly[k]] == object_ids[sl_poly[m]]:
-                continue
-            if _dot(_row(normals, sl_poly[k]), _row(normals, sl_poly[m])) > -1.0 + angle_tol:
+            if not _pressed_pair(normals, object_ids, sl_poly, in_plane, k, m, angle_tol):
                 continue
             if _inside_to_first_order(points, offsets, normals, sl_poly[k], crossing, halfway, tol, False) and \
                     _inside_to_first_order(points, offsets, normals, sl_poly[m], crossing, halfway, tol, False):
