@@ -516,6 +516,19 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
 
 
 @njit_leaf
+def _slide_along(vertices, edges, edge, delta, f1, f2):
+    """(d, slide): the unit direction d of `edge` and how far along d the point where a line meets it moves
+    when the line is moved by the small 3-vector `delta` across it (frame f1, f2): the part of delta across
+    the line that the edge gives. slide is NaN when the edge runs along the line (it gives none)."""
+    d = _edge_direction(vertices, edges, edge, -1)
+    w1 = _dot(d, f1)
+    w2 = _dot(d, f2)
+    if w1 * w1 + w2 * w2 <= 1e-24:
+        return d, np.nan
+    return d, (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
+
+
+@njit_leaf
 def _pressed_between_contacts(points, offsets, normals, vertices, edges, object_ids, sl_poly, n_sliding, in_plane,
                               crossing, delta, edge_a, edge_b, f1, f2, angle_tol, tol):  # fmt: skip
     """Whether lines moved by the small 3-vector `delta` (across the line, frame f1, f2) off the point `crossing`
@@ -525,12 +538,9 @@ def _pressed_between_contacts(points, offsets, normals, vertices, edges, object_
     that the edge gives (_relaxed_arc's slide); the point halfway between them is tested to first order."""
     halfway = (0.0, 0.0, 0.0)
     for edge in (edge_a, edge_b):
-        d = _edge_direction(vertices, edges, edge, -1)
-        w1 = _dot(d, f1)
-        w2 = _dot(d, f2)
-        if w1 * w1 + w2 * w2 <= 1e-24:
+        d, slide = _slide_along(vertices, edges, edge, delta, f1, f2)
+        if not np.isfinite(slide):
             return False
-        slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
         halfway = _along(halfway, 0.5 * slide, d)
     for k in range(n_sliding):
         for m in range(k + 1, n_sliding):
@@ -1213,24 +1223,18 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             # the contact slides along the kept edge, so its position on the line moves too: a face met at
             # the same point is in front of the edge (the arc does not exist) or behind it (the line stops).
             # What can reject the arc comes before the faces closing around the edge, which cost arc tangents
-            d = _edge_direction(vertices, edges, r_id[j], -1)
-            w1 = _dot(d, f1)
-            w2 = _dot(d, f2)
-            if w1 * w1 + w2 * w2 <= 1e-24:
+            d, slide = _slide_along(vertices, edges, r_id[j], delta, f1, f2)
+            if not np.isfinite(slide):
                 return n_inc
-            slide = (_dot(delta, f1) * w1 + _dot(delta, f2) * w2) / (w1 * w1 + w2 * w2)
             # an edge met at its end vertex only holds the lines whose contact moves into it
             if r_pin[j] >= 0 and slide * (1.0 if edges[r_id[j], 0] == r_pin[j] else -1.0) <= _SIDE_EPS:
                 return n_inc
             # so does the other edge of a pencil's pair, met at its end vertex too (objects touching corner to
             # corner): its contact slides along it off the corner as well
             if crossed >= 0 and r_pin[norm_partner] >= 0:
-                d_crossed = _edge_direction(vertices, edges, crossed, -1)
-                c1 = _dot(d_crossed, f1)
-                c2 = _dot(d_crossed, f2)
-                if c1 * c1 + c2 * c2 <= 1e-24:
+                _, slide_crossed = _slide_along(vertices, edges, crossed, delta, f1, f2)
+                if not np.isfinite(slide_crossed):
                     return n_inc
-                slide_crossed = (_dot(delta, f1) * c1 + _dot(delta, f2) * c2) / (c1 * c1 + c2 * c2)
                 if slide_crossed * (1.0 if edges[crossed, 0] == r_pin[norm_partner] else -1.0) <= _SIDE_EPS:
                     return n_inc
             generator_shift = slide * _dot(d, u)
