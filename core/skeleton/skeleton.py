@@ -43,6 +43,7 @@ from .validation import (
     IncidenceChunk,
     NodeChunk,
     _enters,
+    edge_twins,
     element_solids,
     validate_candidates,
 )
@@ -149,6 +150,7 @@ class Skeleton:
         n_nodes = self._n_nodes
         rejected = np.zeros_like(self.rejected)
         element_solid = element_solids(self.scene, self.topology)
+        edge_twin = edge_twins(self.scene)
         edge_tol = _edge_tolerance(self.scene)
         for candidates, fraction in iter_candidates(
             self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
@@ -159,7 +161,8 @@ class Skeleton:
             if len(built):
                 candidates = _not_through(self.scene, candidates, built)
             nodes, incidences, counters = validate_candidates(
-                self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid
+                self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid,
+                edge_twin=edge_twin,
             )
             rejected += counters
             nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)

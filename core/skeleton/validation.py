@@ -31,6 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from ..bvh import STACK_SIZE
 from ..jit import njit_leaf
@@ -115,14 +118,15 @@ _SIDE_EPS = 1e-9
 _Geometry = namedtuple(
     "_Geometry",
     "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local corner_edge "
-    "face_group object_ids element_solid diag tol angle_tol",
+    "face_group object_ids element_solid edge_twin diag tol angle_tol",
 )
 """The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
 int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
 vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
 int64); corner_edge (P,) int64 the edge from each polygon corner to the next; face_group and object_ids (F,)
 int64; element_solid (V + E,) int64 the closed convex object all faces of each vertex, then each edge, belong to
-(-1: none, see element_solids); the scene's diagonal, tol.length and tol.cosine (floats)."""
+(-1: none, see element_solids); edge_twin (E,) int64 the next edge on the same segment (see edge_twins); the scene's
+diagonal, tol.length and tol.cosine (floats)."""
 
 _Line = namedtuple(
     "_Line", "c_poly c_kind c_local g_lo g_hi g_tau n_groups sl_poly sl_a sl_b n_sliding start u f1 f2"
@@ -735,17 +739,63 @@ def _shared_face(ef_off, ef_face, e, f):
 
 
 @njit_leaf
-def _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n, tol):
-    """Whether an EEE arc's three edges share a plane or two bound one face: the degenerate edge triples the
-    paper rejects (1999, section 2.2); they are not visual events. Two parallel edges and a third piercing their
-    plane are one: the pencil of that plane about the piercing point (see _pivot), unless _aligned_pencil."""
+def _flush_faces(points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, e, f, tol):
+    """Whether a face of edge e and a face of edge f are one face split in two: they meet along an edge of one
+    lying on an edge of the other (edge_twin) and lie in one plane, facing one way (boxes stacked flush: the
+    front faces of both, between the top edge of the lower and the bottom edge of the upper). A line meeting e
+    and f lies in that plane, as for two edges of one face."""
+    for i in range(ef_off[e], ef_off[e + 1]):
+        face = ef_face[i]
+        for corner in range(offsets[face], offsets[face + 1]):
+            twin = edge_twin[corner_edge[corner]]
+            while twin >= 0 and twin != corner_edge[corner]:
+                for k in range(ef_off[f], ef_off[f + 1]):
+                    other = ef_face[k]
+                    if other != face and _touches_edge(ef_off, ef_face, other, twin) and \
+                            _same_plane(points, offsets, normals, face, other, tol):  # fmt: skip
+                        return True
+                twin = edge_twin[twin]
+    return False
+
+
+@njit_leaf
+def _touches_edge(ef_off, ef_face, face, edge):
+    """Whether `edge` bounds `face`."""
+    for i in range(ef_off[edge], ef_off[edge + 1]):
+        if ef_face[i] == face:
+            return True
+    return False
+
+
+@njit_leaf
+def _same_plane(points, offsets, normals, a, b, tol):
+    """Whether faces a and b face one way and every corner of b lies within tol of a's plane."""
+    if _dot(_row(normals, a), _row(normals, b)) <= 0.0:
+        return False
+    normal = _row(normals, a)
+    offset = -_dot(normal, _row(points, offsets[a]))
+    for corner in range(offsets[b], offsets[b + 1]):
+        if not _near_plane(_row(points, corner), normal, offset, tol):
+            return False
+    return True
+
+
+@njit_leaf
+def _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin, r_kind, r_id, n,
+                    tol):  # fmt: skip
+    """Whether an EEE arc's three edges share a plane or two bound one face (or two faces stacked flush, see
+    _flush_faces): the degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events.
+    Two parallel edges and a third piercing their plane are one: the pencil of that plane about the piercing
+    point (see _pivot), unless _aligned_pencil."""
     if n == 3 and r_kind[0] == GEN_EDGE and r_kind[1] == GEN_EDGE and r_kind[2] == GEN_EDGE:
         # two edges of one face: a line meeting both inside them lies in the face's plane (or passes through
         # their common vertex), so the family is the face's pencil through the third edge's crossing point, an
         # FE swath of seed 003's appendix, not an EEE swath (met at face nodes, see _validate_chunk)
         for j in range(3):
             for k in range(j + 1, 3):
-                if _shared_face(ef_off, ef_face, r_id[j], r_id[k]):
+                if _shared_face(ef_off, ef_face, r_id[j], r_id[k]) or _flush_faces(
+                    points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, r_id[j], r_id[k], tol
+                ):
                     return True
                 if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol) and \
                         _aligned_pencil(vertices, edges, r_id[j], r_id[k], r_id[3 - j - k], tol):  # fmt: skip
@@ -928,7 +978,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
     vertex) and the direction, +1 when the arc extends towards larger s."""
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry
+     corner_edge, face_group, object_ids, element_solid, edge_twin, diag, tol, angle_tol) = geometry
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2 = line
     r_kind, r_id, r_group, r_pin = retained
     (polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
@@ -1003,7 +1053,8 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             system[row, 2] = -w2 * tn
             system[row, 3] = w1 * tn
             row += 1
-    if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, r_kind, r_id, n_retained, tol):
+    if row != 4 or _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin,
+                                   r_kind, r_id, n_retained, tol):  # fmt: skip
         return n_inc
     if not _solve4(system, rhs, x):
         return n_inc
@@ -2183,7 +2234,7 @@ def _validate_chunk(
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, diag, tol, angle_tol) = geometry  # fmt: skip
+     corner_edge, face_group, object_ids, element_solid, edge_twin, diag, tol, angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
@@ -2736,28 +2787,34 @@ def _validate_chunk(
     )  # fmt: skip
 
 
-def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS, element_solid=None):
+def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS, element_solid=None,
+                        edge_twin=None):  # fmt: skip
     """Cast every candidate line; return (NodeChunk, IncidenceChunk, counters (N_COUNTERS,) int64).
 
     scene: core.scene.Scene; topology: core.skeleton.topology.Topology; bvh: core.bvh.BVH of the scene;
     candidates: NodeCandidates; edge_mask (E,) bool: the edges a vertex generator may slide along.
     workers: threads casting consecutive slices of the candidates at once (the kernel releases the GIL); the
-    result is the same for any number, in candidate order. element_solid: element_solids(scene, topology), for
-    a caller validating many chunks of one scene (computed here when None).
+    result is the same for any number, in candidate order. element_solid: element_solids(scene, topology), and
+    edge_twin: edge_twins(scene), for a caller validating many chunks of one scene (computed here when None).
     """
     n = len(candidates.kind)
     if element_solid is None:
         element_solid = element_solids(scene, topology)
+    if edge_twin is None:
+        edge_twin = edge_twins(scene)
     parts = max(1, min(_SLICES_PER_WORKER * int(workers), n // _MIN_SLICE))
     bounds = np.linspace(0, n, parts + 1).astype(np.int64)
     slices = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     if parts == 1:
-        results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 0, n)]
+        results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, 0, n)]
     else:
         with ThreadPoolExecutor(min(parts, int(workers))) as pool:
             results = list(
                 pool.map(
-                    lambda b: _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, *b), slices
+                    lambda b: _validate_slice(
+                        scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, *b
+                    ),
+                    slices,
                 )
             )
     if len(results) == 1:
@@ -2821,14 +2878,42 @@ def _common_value(values: np.ndarray, offsets: np.ndarray, faces: np.ndarray) ->
     return np.where((counts > 0) & (low == high), high, -1).astype(np.int64)
 
 
-def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, lo: int, hi: int):
+def edge_twins(scene) -> np.ndarray:
+    """(E,) int64 for each edge, the next edge (by id, after the last the first) of those lying on the same
+    segment, both ends within tol.length of its ends in either order (the top edge of a box and the bottom
+    edge of a box stacked on it with the same footprint), or -1 when no other edge does."""
+    n = len(scene.edges)
+    twin = np.full(n, -1, dtype=np.int64)
+    if n < 2:
+        return twin
+    first = scene.vertices[scene.edges[:, 0]]
+    second = scene.vertices[scene.edges[:, 1]]
+    ends = np.vstack([np.hstack([first, second]), np.hstack([second, first])])
+    pairs = cKDTree(ends).query_pairs(scene.tol.length, output_type="ndarray") % n
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    if len(pairs) == 0:
+        return twin
+    n_groups, group = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (n, n)))
+    members = np.unique(pairs)
+    order = members[np.lexsort((members, group[members]))]
+    following = np.roll(order, -1)
+    starts = np.r_[True, group[order[1:]] != group[order[:-1]]]
+    # the last of each group points back to its first
+    ends_at = np.r_[starts[1:], True]
+    first_of = np.maximum.accumulate(np.where(starts, np.arange(len(order)), 0))
+    following[ends_at] = order[first_of[ends_at]]
+    twin[order] = following
+    return twin
+
+
+def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, lo: int, hi: int):
     """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice); element_solid:
-    element_solids(scene, topology)."""
+    element_solids(scene, topology); edge_twin: edge_twins(scene)."""
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
         scene.edge_faces, topology.edge_face_local, scene.polygon_edge_ids, topology.face_group,
-        np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, float(scene.diagonal),
+        np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, edge_twin, float(scene.diagonal),
         float(scene.tol.length),
         float(scene.tol.cosine),
     )  # fmt: skip

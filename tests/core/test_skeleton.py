@@ -749,6 +749,32 @@ def test_no_pencil_arcs_between_touching_faces_past_a_crossing():
     assert (skeleton.arcs.node[arcs[0]] >= 0).all()
     assert skeleton.stats["dangling_arcs"] == 0
 
+def test_no_swath_in_the_plane_of_faces_stacked_flush():
+    """bench closed_furnished_room(5) cut down to three boxes: a box stacked on another with the same footprint
+    (the lower box's top edges and the upper box's bottom edges are one segment each), a third box against both
+    with its top edge across their common side plane. An edge of the lower front face and an edge of the upper
+    one hold every line meeting both to the plane of those two faces, as two edges of one face do: such lines are
+    the plane's pencil, no EEE swath, whichever of the two coincident edges names the lines (the swaths named
+    through the upper box's bottom edge were kept, and had one node each)."""
+    scene = boxes_in_room(
+        [((2.0, 0.25, 0.0), (2.45, 0.5, 0.45)), ((2.0, 0.25, 0.45), (2.45, 0.5, 0.8)),
+         ((1.5, 0.0, 0.45), (2.0, 0.85, 0.75))],
+        size=(5.4, 5.4, 2.8),
+    )  # fmt: skip
+    skeleton = build_skeleton(scene)
+    nv = scene.n_vertices
+    (lower_upright,) = _edges_between(scene, (2.45, 0.25, 0.0), (2.45, 0.25, 0.45))
+    (upper_upright,) = _edges_between(scene, (2.0, 0.25, 0.45), (2.0, 0.25, 0.8))
+    seam = _edges_between(scene, (2.0, 0.25, 0.45), (2.45, 0.25, 0.45))
+    (across,) = _edges_between(scene, (2.0, 0.0, 0.75), (2.0, 0.85, 0.75))
+    assert len(seam) == 2
+    arcs = [set(codes.tolist()) for codes in skeleton.arcs.codes]
+    for upright in (lower_upright, upper_upright):
+        for edge in seam:
+            assert {nv + upright, nv + edge, nv + across} not in arcs
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
 def test_arcs_along_a_seam_end_at_a_corner_on_it():
     """Two boxes side by side and a lower one against both (office-432's crates): the lower box's top corner lies
     on the seam of the two others' collinear vertical edges. The lines through a vertex meeting either edge of

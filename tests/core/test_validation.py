@@ -15,7 +15,14 @@ from core.scene import EDGE_FLAT
 from core.skeleton.candidates import CANDIDATE_E4, NodeCandidates
 from core.skeleton.enumeration import iter_candidates
 from core.skeleton.topology import scene_topology
-from core.skeleton.validation import ARC_EEE, GEN_EDGE, GEN_VERTEX, _pierced_between, validate_candidates
+from core.skeleton.validation import (
+    ARC_EEE,
+    GEN_EDGE,
+    GEN_VERTEX,
+    _pierced_between,
+    edge_twins,
+    validate_candidates,
+)
 from tests.core.naive_enumeration import generator_masks
 from tests.core.skeleton_scenes import boxes_in_room, lamp_table_scene
 
@@ -177,3 +184,30 @@ def test_no_pencil_is_parametrised_by_its_pivot_edge():
     # relaxing a seat's edge leaves the two legs, parallel: the pencil of their plane about the point where the
     # other seat's edge pierces it, parametrised by a leg (not its pivot), is an arc
     assert any(set(scene.n_vertices + np.array(legs)) <= set(codes) for codes in named)
+
+
+def test_edge_twins_cycle_through_the_edges_on_one_segment():
+    """Three boxes meeting along one segment (a box, one beside it, one stacked on it: their edges along x = 1,
+    z = 1 coincide), a fourth on the stacked one with a smaller footprint (its bottom edges lie on the others'
+    top faces, inside their edges: no twins). edge_twins chains each edge to the next id on its segment, the last
+    back to the first, against a check of every pair of edges."""
+    scene = boxes_in_room(
+        [((0.5, 0.5, 0.0), (1.0, 1.0, 0.5)), ((1.0, 0.5, 0.0), (1.5, 1.0, 0.5)), ((0.5, 0.5, 0.5), (1.0, 1.0, 1.0)),
+         ((0.6, 0.6, 1.0), (0.9, 0.9, 1.2))],
+    )  # fmt: skip
+    twin = edge_twins(scene)
+    ends = scene.vertices[scene.edges]
+    for e in range(len(scene.edges)):
+        same = [
+            f for f in range(len(scene.edges))
+            if np.abs(ends[f] - ends[e]).max() < 1e-9 or np.abs(ends[f, ::-1] - ends[e]).max() < 1e-9
+        ]  # fmt: skip
+        if len(same) == 1:
+            assert twin[e] == -1
+            continue
+        assert twin[e] == (same[(same.index(e) + 1) % len(same)])
+    sizes = {}
+    for e in np.flatnonzero(twin >= 0):
+        key = tuple(sorted(map(tuple, np.round(ends[e], 9).tolist())))
+        sizes[key] = sizes.get(key, 0) + 1
+    assert sorted(sizes.values()).count(3) == 1
