@@ -118,15 +118,16 @@ _SIDE_EPS = 1e-9
 _Geometry = namedtuple(
     "_Geometry",
     "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local corner_edge "
-    "face_group object_ids element_solid edge_twin diag tol angle_tol",
+    "face_group object_ids element_solid edge_twin split_edge diag tol angle_tol",
 )
 """The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
 int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
 vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
 int64); corner_edge (P,) int64 the edge from each polygon corner to the next; face_group and object_ids (F,)
 int64; element_solid (V + E,) int64 the closed convex object all faces of each vertex, then each edge, belong to
-(-1: none, see element_solids); edge_twin (E,) int64 the next edge on the same segment (see edge_twins); the scene's
-diagonal, tol.length and tol.cosine (floats)."""
+(-1: none, see element_solids); edge_twin (E,) int64 the next edge on the same segment (see edge_twins) and
+split_edge (E,) bool whether a face of the edge has an edge with a twin (_flush_faces); the scene's diagonal,
+tol.length and tol.cosine (floats)."""
 
 _Line = namedtuple(
     "_Line", "c_poly c_kind c_local g_lo g_hi g_tau n_groups sl_poly sl_a sl_b n_sliding start u f1 f2"
@@ -739,11 +740,13 @@ def _shared_face(ef_off, ef_face, e, f):
 
 
 @njit_leaf
-def _flush_faces(points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, e, f, tol):
+def _flush_faces(points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, split_edge, e, f, tol):
     """Whether a face of edge e and a face of edge f are one face split in two: they meet along an edge of one
     lying on an edge of the other (edge_twin) and lie in one plane, facing one way (boxes stacked flush: the
     front faces of both, between the top edge of the lower and the bottom edge of the upper). A line meeting e
     and f lies in that plane, as for two edges of one face."""
+    if not (split_edge[e] and split_edge[f]):
+        return False
     for i in range(ef_off[e], ef_off[e + 1]):
         face = ef_face[i]
         for corner in range(offsets[face], offsets[face + 1]):
@@ -781,8 +784,8 @@ def _same_plane(points, offsets, normals, a, b, tol):
 
 
 @njit_leaf
-def _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin, r_kind, r_id, n,
-                    tol):  # fmt: skip
+def _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin, split_edge,
+                    r_kind, r_id, n, tol):  # fmt: skip
     """Whether an EEE arc's three edges share a plane or two bound one face (or two faces stacked flush, see
     _flush_faces): the degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events.
     Two parallel edges and a third piercing their plane are one: the pencil of that plane about the piercing
@@ -794,7 +797,7 @@ def _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_o
         for j in range(3):
             for k in range(j + 1, 3):
                 if _shared_face(ef_off, ef_face, r_id[j], r_id[k]) or _flush_faces(
-                    points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, r_id[j], r_id[k], tol
+                    points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, split_edge, r_id[j], r_id[k], tol
                 ):
                     return True
                 if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol) and \
@@ -978,7 +981,8 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
     vertex) and the direction, +1 when the arc extends towards larger s."""
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, edge_twin, diag, tol, angle_tol) = geometry
+     corner_edge, face_group, object_ids, element_solid, edge_twin, split_edge, diag, tol,
+     angle_tol) = geometry
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2 = line
     r_kind, r_id, r_group, r_pin = retained
     (polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
@@ -1054,7 +1058,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             system[row, 3] = w1 * tn
             row += 1
     if row != 4 or _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin,
-                                   r_kind, r_id, n_retained, tol):  # fmt: skip
+                                   split_edge, r_kind, r_id, n_retained, tol):  # fmt: skip
         return n_inc
     if not _solve4(system, rhs, x):
         return n_inc
@@ -2234,7 +2238,8 @@ def _validate_chunk(
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, edge_twin, diag, tol, angle_tol) = geometry  # fmt: skip
+     corner_edge, face_group, object_ids, element_solid, edge_twin, split_edge, diag, tol,
+     angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
     n_vertices = vertices.shape[0]
@@ -2880,8 +2885,9 @@ def _common_value(values: np.ndarray, offsets: np.ndarray, faces: np.ndarray) ->
 
 def edge_twins(scene) -> np.ndarray:
     """(E,) int64 for each edge, the next edge (by id, after the last the first) of those lying on the same
-    segment, both ends within tol.length of its ends in either order (the top edge of a box and the bottom
-    edge of a box stacked on it with the same footprint), or -1 when no other edge does."""
+    segment, their two ends within tol.length of its ends in either order (one distance over both ends: the top
+    edge of a box and the bottom edge of a box stacked on it with the same footprint), or -1 when no other edge
+    does."""
     n = len(scene.edges)
     twin = np.full(n, -1, dtype=np.int64)
     if n < 2:
@@ -2906,14 +2912,26 @@ def edge_twins(scene) -> np.ndarray:
     return twin
 
 
+def _any_of(flag: np.ndarray, offsets: np.ndarray, items: np.ndarray) -> np.ndarray:
+    """(K,) bool for each row of the CSR row -> items (offsets (K + 1,), items (M,) int64), whether flag (N,) bool
+    holds for one of its items (a polygon's edges, an edge's faces)."""
+    counts = np.diff(offsets)
+    hits = np.zeros(len(counts), dtype=np.int64)
+    np.add.at(hits, np.repeat(np.arange(len(counts)), counts), flag[items].astype(np.int64))
+    return hits > 0
+
+
 def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, lo: int, hi: int):
     """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice); element_solid:
     element_solids(scene, topology); edge_twin: edge_twins(scene)."""
+    twinned_face = _any_of(edge_twin >= 0, scene.polygon_offsets, scene.polygon_edge_ids)
+    split_edge = _any_of(twinned_face, scene.edge_face_offsets, scene.edge_faces)
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
         scene.edge_faces, topology.edge_face_local, scene.polygon_edge_ids, topology.face_group,
-        np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, edge_twin, float(scene.diagonal),
+        np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, edge_twin, split_edge,
+        float(scene.diagonal),
         float(scene.tol.length),
         float(scene.tol.cosine),
     )  # fmt: skip
