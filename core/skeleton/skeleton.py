@@ -43,8 +43,8 @@ from .validation import (
     IncidenceChunk,
     NodeChunk,
     _enters,
-    edge_twins,
     element_solids,
+    flat_regions,
     validate_candidates,
 )
 
@@ -150,7 +150,7 @@ class Skeleton:
         n_nodes = self._n_nodes
         rejected = np.zeros_like(self.rejected)
         element_solid = element_solids(self.scene, self.topology)
-        edge_twin = edge_twins(self.scene)
+        face_region = flat_regions(self.scene)
         edge_tol = _edge_tolerance(self.scene)
         for candidates, fraction in iter_candidates(
             self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
@@ -162,7 +162,7 @@ class Skeleton:
                 candidates = _not_through(self.scene, candidates, built)
             nodes, incidences, counters = validate_candidates(
                 self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid,
-                edge_twin=edge_twin,
+                face_region=face_region,
             )
             rejected += counters
             nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)

@@ -118,15 +118,15 @@ _SIDE_EPS = 1e-9
 _Geometry = namedtuple(
     "_Geometry",
     "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local corner_edge "
-    "face_group object_ids element_solid edge_twin split_edge diag tol angle_tol",
+    "face_group object_ids element_solid face_region split_edge diag tol angle_tol",
 )
 """The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
 int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
 vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
 int64); corner_edge (P,) int64 the edge from each polygon corner to the next; face_group and object_ids (F,)
 int64; element_solid (V + E,) int64 the closed convex object all faces of each vertex, then each edge, belong to
-(-1: none, see element_solids); edge_twin (E,) int64 the next edge on the same segment (see edge_twins) and
-split_edge (E,) bool whether a face of the edge has an edge with a twin (_flush_faces); the scene's diagonal,
+(-1: none, see element_solids); face_region (F,) int64 each face's flat region (see flat_regions)
+and split_edge (E,) bool whether a face of the edge shares its region with another (_flush_faces); the scene's diagonal,
 tol.length and tol.cosine (floats)."""
 
 _Line = namedtuple(
@@ -740,52 +740,21 @@ def _shared_face(ef_off, ef_face, e, f):
 
 
 @njit_leaf
-def _flush_faces(points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, split_edge, e, f, tol):
-    """Whether a face of edge e and a face of edge f are one face split in two: they meet along an edge of one
-    lying on an edge of the other (edge_twin) and lie in one plane, facing one way (boxes stacked flush: the
-    front faces of both, between the top edge of the lower and the bottom edge of the upper). A line meeting e
-    and f lies in that plane, as for two edges of one face."""
+def _flush_faces(ef_off, ef_face, face_region, split_edge, e, f):
+    """Whether a face of edge e and a face of edge f are parts of one flat region (flat_regions: faces of objects
+    in one plane joined along their edges; boxes stacked flush, a box beside another of its height). A line
+    meeting e and f lies in that plane, as for two edges of one face."""
     if not (split_edge[e] and split_edge[f]):
         return False
     for i in range(ef_off[e], ef_off[e + 1]):
-        face = ef_face[i]
-        for corner in range(offsets[face], offsets[face + 1]):
-            twin = edge_twin[corner_edge[corner]]
-            while twin >= 0 and twin != corner_edge[corner]:
-                for k in range(ef_off[f], ef_off[f + 1]):
-                    other = ef_face[k]
-                    if other != face and _touches_edge(ef_off, ef_face, other, twin) and \
-                            _same_plane(points, offsets, normals, face, other, tol):  # fmt: skip
-                        return True
-                twin = edge_twin[twin]
+        for k in range(ef_off[f], ef_off[f + 1]):
+            if ef_face[i] != ef_face[k] and face_region[ef_face[i]] == face_region[ef_face[k]]:
+                return True
     return False
 
 
 @njit_leaf
-def _touches_edge(ef_off, ef_face, face, edge):
-    """Whether `edge` bounds `face`."""
-    for i in range(ef_off[edge], ef_off[edge + 1]):
-        if ef_face[i] == face:
-            return True
-    return False
-
-
-@njit_leaf
-def _same_plane(points, offsets, normals, a, b, tol):
-    """Whether faces a and b face one way and every corner of b lies within tol of a's plane."""
-    if _dot(_row(normals, a), _row(normals, b)) <= 0.0:
-        return False
-    normal = _row(normals, a)
-    offset = -_dot(normal, _row(points, offsets[a]))
-    for corner in range(offsets[b], offsets[b + 1]):
-        if not _near_plane(_row(points, corner), normal, offset, tol):
-            return False
-    return True
-
-
-@njit_leaf
-def _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin, split_edge,
-                    r_kind, r_id, n, tol):  # fmt: skip
+def _coplanar_swath(vertices, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id, n, tol):
     """Whether an EEE arc's three edges share a plane or two bound one face (or two faces stacked flush, see
     _flush_faces): the degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events.
     Two parallel edges and a third piercing their plane are one: the pencil of that plane about the piercing
@@ -796,9 +765,8 @@ def _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_o
         # FE swath of seed 003's appendix, not an EEE swath (met at face nodes, see _validate_chunk)
         for j in range(3):
             for k in range(j + 1, 3):
-                if _shared_face(ef_off, ef_face, r_id[j], r_id[k]) or _flush_faces(
-                    points, offsets, normals, corner_edge, ef_off, ef_face, edge_twin, split_edge, r_id[j], r_id[k], tol
-                ):
+                if _shared_face(ef_off, ef_face, r_id[j], r_id[k]) or \
+                        _flush_faces(ef_off, ef_face, face_region, split_edge, r_id[j], r_id[k]):  # fmt: skip
                     return True
                 if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol) and \
                         _aligned_pencil(vertices, edges, r_id[j], r_id[k], r_id[3 - j - k], tol):  # fmt: skip
@@ -981,7 +949,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
     vertex) and the direction, +1 when the arc extends towards larger s."""
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, edge_twin, split_edge, diag, tol,
+     corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
      angle_tol) = geometry
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2 = line
     r_kind, r_id, r_group, r_pin = retained
@@ -1057,8 +1025,8 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             system[row, 2] = -w2 * tn
             system[row, 3] = w1 * tn
             row += 1
-    if row != 4 or _coplanar_swath(points, offsets, normals, vertices, edges, corner_edge, ef_off, ef_face, edge_twin,
-                                   split_edge, r_kind, r_id, n_retained, tol):  # fmt: skip
+    if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id, n_retained,
+                                   tol):  # fmt: skip
         return n_inc
     if not _solve4(system, rhs, x):
         return n_inc
@@ -2238,7 +2206,7 @@ def _validate_chunk(
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
 ):  # fmt: skip
     (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, edge_twin, split_edge, diag, tol,
+     corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
      angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     n_cand = cand_kind.shape[0]
@@ -2793,31 +2761,31 @@ def _validate_chunk(
 
 
 def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS, element_solid=None,
-                        edge_twin=None):  # fmt: skip
+                        face_region=None):  # fmt: skip
     """Cast every candidate line; return (NodeChunk, IncidenceChunk, counters (N_COUNTERS,) int64).
 
     scene: core.scene.Scene; topology: core.skeleton.topology.Topology; bvh: core.bvh.BVH of the scene;
     candidates: NodeCandidates; edge_mask (E,) bool: the edges a vertex generator may slide along.
     workers: threads casting consecutive slices of the candidates at once (the kernel releases the GIL); the
     result is the same for any number, in candidate order. element_solid: element_solids(scene, topology), and
-    edge_twin: edge_twins(scene), for a caller validating many chunks of one scene (computed here when None).
+    face_region: flat_regions(scene), for a caller validating many chunks of one scene (computed here when None).
     """
     n = len(candidates.kind)
     if element_solid is None:
         element_solid = element_solids(scene, topology)
-    if edge_twin is None:
-        edge_twin = edge_twins(scene)
+    if face_region is None:
+        face_region = flat_regions(scene)
     parts = max(1, min(_SLICES_PER_WORKER * int(workers), n // _MIN_SLICE))
     bounds = np.linspace(0, n, parts + 1).astype(np.int64)
     slices = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     if parts == 1:
-        results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, 0, n)]
+        results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, face_region, 0, n)]
     else:
         with ThreadPoolExecutor(min(parts, int(workers))) as pool:
             results = list(
                 pool.map(
                     lambda b: _validate_slice(
-                        scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, *b
+                        scene, topology, bvh, candidates, edge_mask, element_solid, face_region, *b
                     ),
                     slices,
                 )
@@ -2883,33 +2851,63 @@ def _common_value(values: np.ndarray, offsets: np.ndarray, faces: np.ndarray) ->
     return np.where((counts > 0) & (low == high), high, -1).astype(np.int64)
 
 
-def edge_twins(scene) -> np.ndarray:
-    """(E,) int64 for each edge, the next edge (by id, after the last the first) of those lying on the same
-    segment, their two ends within tol.length of its ends in either order (one distance over both ends: the top
-    edge of a box and the bottom edge of a box stacked on it with the same footprint), or -1 when no other edge
-    does."""
-    n = len(scene.edges)
-    twin = np.full(n, -1, dtype=np.int64)
-    if n < 2:
-        return twin
-    first = scene.vertices[scene.edges[:, 0]]
-    second = scene.vertices[scene.edges[:, 1]]
-    ends = np.vstack([np.hstack([first, second]), np.hstack([second, first])])
-    pairs = cKDTree(ends).query_pairs(scene.tol.length, output_type="ndarray") % n
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    if len(pairs) == 0:
-        return twin
-    n_groups, group = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (n, n)))
-    members = np.unique(pairs)
-    order = members[np.lexsort((members, group[members]))]
-    following = np.roll(order, -1)
-    starts = np.r_[True, group[order[1:]] != group[order[:-1]]]
-    # the last of each group points back to its first
-    ends_at = np.r_[starts[1:], True]
-    first_of = np.maximum.accumulate(np.where(starts, np.arange(len(order)), 0))
-    following[ends_at] = order[first_of[ends_at]]
-    twin[order] = following
-    return twin
+def flat_regions(scene) -> np.ndarray:
+    """(F,) int64 for each face its flat region: faces of different objects lying in one plane (either way round,
+    every corner within tol.length of the other's plane) and sharing a piece of boundary longer than tol.length
+    (an edge of each on one line, overlapping) are joined, and so on (boxes stacked flush: their front faces; a
+    box beside another of its height: their tops; the top of a box and the bottom of one stacked on it). The
+    label is a connected component's; a face joined to none has a region of its own."""
+    n = scene.n_polygons
+    normals = scene.normals
+    along = np.argmax(np.abs(normals), axis=1)
+    sign = np.where(normals[np.arange(n), along] >= 0.0, 1.0, -1.0)
+    planes = np.hstack([normals * (sign * scene.tol.scale)[:, None], (scene.plane_offsets * sign)[:, None]])
+    pairs = cKDTree(planes).query_pairs(4.0 * scene.tol.length, output_type="ndarray")
+    object_ids = np.asarray(scene.object_ids, dtype=np.int64)
+    pairs = pairs[object_ids[pairs[:, 0]] != object_ids[pairs[:, 1]]]
+    joined = _boundaries_meet(
+        scene.polygon_points, scene.polygon_offsets, normals, pairs.astype(np.int64), scene.tol.length
+    )
+    pairs = pairs[joined]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+@njit(cache=True)
+def _boundaries_meet(points, offsets, normals, pairs, tol):
+    """(K,) bool for each face pair (pairs (K, 2) int64): every corner of the second within tol of the first's
+    plane, and a side of each on one line (both ends of the second's within tol of the first's line) overlapping
+    over more than tol."""
+    result = np.zeros(pairs.shape[0], dtype=np.bool_)
+    for k in range(pairs.shape[0]):
+        a = pairs[k, 0]
+        b = pairs[k, 1]
+        normal = _row(normals, a)
+        offset = -_dot(normal, _row(points, offsets[a]))
+        inside = True
+        for corner in range(offsets[b], offsets[b + 1]):
+            inside = inside and _near_plane(_row(points, corner), normal, offset, tol)
+        if not inside:
+            continue
+        for i in range(offsets[a], offsets[a + 1]):
+            p = _row(points, i)
+            side = _minus(_row(points, offsets[a] + (i - offsets[a] + 1) % (offsets[a + 1] - offsets[a])), p)
+            length = np.sqrt(_dot(side, side))
+            if length <= tol:
+                continue
+            u = _over(side, length)
+            for j in range(offsets[b], offsets[b + 1]):
+                q0 = _minus(_row(points, j), p)
+                q1 = _minus(_row(points, offsets[b] + (j - offsets[b] + 1) % (offsets[b + 1] - offsets[b])), p)
+                t0 = _dot(q0, u)
+                t1 = _dot(q1, u)
+                off0 = _minus(q0, _scaled(u, t0))
+                off1 = _minus(q1, _scaled(u, t1))
+                if _dot(off0, off0) > tol * tol or _dot(off1, off1) > tol * tol:
+                    continue
+                if min(max(t0, t1), length) - max(min(t0, t1), 0.0) > tol:
+                    result[k] = True
+    return result
 
 
 def _any_of(flag: np.ndarray, offsets: np.ndarray, items: np.ndarray) -> np.ndarray:
@@ -2921,16 +2919,16 @@ def _any_of(flag: np.ndarray, offsets: np.ndarray, items: np.ndarray) -> np.ndar
     return hits > 0
 
 
-def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, edge_twin, lo: int, hi: int):
+def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, face_region, lo: int, hi: int):
     """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice); element_solid:
-    element_solids(scene, topology); edge_twin: edge_twins(scene)."""
-    twinned_face = _any_of(edge_twin >= 0, scene.polygon_offsets, scene.polygon_edge_ids)
-    split_edge = _any_of(twinned_face, scene.edge_face_offsets, scene.edge_faces)
+    element_solids(scene, topology); face_region: flat_regions(scene)."""
+    shared_region = np.bincount(face_region, minlength=scene.n_polygons)[face_region] > 1
+    split_edge = _any_of(shared_region, scene.edge_face_offsets, scene.edge_faces)
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
         scene.edge_faces, topology.edge_face_local, scene.polygon_edge_ids, topology.face_group,
-        np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, edge_twin, split_edge,
+        np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, face_region, split_edge,
         float(scene.diagonal),
         float(scene.tol.length),
         float(scene.tol.cosine),

@@ -775,6 +775,27 @@ def test_no_swath_in_the_plane_of_faces_stacked_flush():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
+def test_no_swath_in_the_plane_of_a_top_beside_the_top_it_continues():
+    """bench closed_furnished_room(0) cut down to four boxes: a box with another stacked flush on it, a lower box
+    of the first one's height standing against it (their tops one flat region, joined along part of a side, and
+    the stacked box's bottom on that side too), a far box whose vertical edges pierce the tops' plane. An edge of
+    each top holds every line meeting both to that plane: no EEE swath, whichever of the two coincident edges
+    between the stacked boxes names the lines (they had one node each)."""
+    scene = boxes_in_room(
+        [((4.2, 3.05, 1.35), (4.9, 3.75, 1.8)), ((4.2, 3.05, 1.8), (4.9, 3.75, 2.25)),
+         ((3.75, 3.05, 1.35), (4.2, 3.55, 1.8)), ((0.15, 2.4, 1.0), (0.8, 2.95, 1.85))],
+        size=(5.4, 5.4, 2.8),
+    )  # fmt: skip
+    skeleton = build_skeleton(scene)
+    nv = scene.n_vertices
+    seam = _edges_between(scene, (4.2, 3.05, 1.8), (4.2, 3.75, 1.8))
+    (front,) = _edges_between(scene, (3.75, 3.05, 1.8), (4.2, 3.05, 1.8))
+    assert len(seam) == 2
+    swaths = [codes for codes in skeleton.arcs.codes if front + nv in codes and any(e + nv in codes for e in seam)]
+    assert all(code < nv for codes in swaths for code in codes if code not in (front + nv, *(e + nv for e in seam)))
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
 def test_arcs_along_a_seam_end_at_a_corner_on_it():
     """Two boxes side by side and a lower one against both (office-432's crates): the lower box's top corner lies
     on the seam of the two others' collinear vertical edges. The lines through a vertex meeting either edge of

@@ -20,7 +20,7 @@ from core.skeleton.validation import (
     GEN_EDGE,
     GEN_VERTEX,
     _pierced_between,
-    edge_twins,
+    flat_regions,
     validate_candidates,
 )
 from tests.core.naive_enumeration import generator_masks
@@ -186,28 +186,54 @@ def test_no_pencil_is_parametrised_by_its_pivot_edge():
     assert any(set(scene.n_vertices + np.array(legs)) <= set(codes) for codes in named)
 
 
-def test_edge_twins_cycle_through_the_edges_on_one_segment():
-    """Three boxes meeting along one segment (a box, one beside it, one stacked on it: their edges along x = 1,
-    z = 1 coincide), a fourth on the stacked one with a smaller footprint (its bottom edges lie on the others'
-    top faces, inside their edges: no twins). edge_twins chains each edge to the next id on its segment, the last
-    back to the first, against a check of every pair of edges."""
+def test_flat_regions_join_coplanar_faces_of_different_objects_along_a_shared_side():
+    """A box, one beside it of its height and one stacked on it with its footprint, and a smaller box on the stacked
+    one: flat_regions puts two faces in one region exactly when a chain of pairs joins them, each pair faces of
+    different objects in one plane (either way round) with sides on one line overlapping by more than tol,
+    against a check of every pair of faces written here. The smaller box's bottom lies inside the top it stands
+    on, touching no side of it: a region of its own."""
     scene = boxes_in_room(
         [((0.5, 0.5, 0.0), (1.0, 1.0, 0.5)), ((1.0, 0.5, 0.0), (1.5, 1.0, 0.5)), ((0.5, 0.5, 0.5), (1.0, 1.0, 1.0)),
          ((0.6, 0.6, 1.0), (0.9, 0.9, 1.2))],
     )  # fmt: skip
-    twin = edge_twins(scene)
-    ends = scene.vertices[scene.edges]
-    for e in range(len(scene.edges)):
-        same = [
-            f for f in range(len(scene.edges))
-            if np.abs(ends[f] - ends[e]).max() < 1e-9 or np.abs(ends[f, ::-1] - ends[e]).max() < 1e-9
-        ]  # fmt: skip
-        if len(same) == 1:
-            assert twin[e] == -1
-            continue
-        assert twin[e] == (same[(same.index(e) + 1) % len(same)])
-    sizes = {}
-    for e in np.flatnonzero(twin >= 0):
-        key = tuple(sorted(map(tuple, np.round(ends[e], 9).tolist())))
-        sizes[key] = sizes.get(key, 0) + 1
-    assert sorted(sizes.values()).count(3) == 1
+    region = flat_regions(scene)
+    n = scene.n_polygons
+    sides = []
+    for p in range(n):
+        corners = scene.polygon_points[scene.polygon_offsets[p] : scene.polygon_offsets[p + 1]]
+        sides.append([(corners[k], corners[(k + 1) % len(corners)]) for k in range(len(corners))])
+
+    def one_plane(a, b):
+        normal, point = scene.normals[a], scene.polygon_points[scene.polygon_offsets[a]]
+        corners = scene.polygon_points[scene.polygon_offsets[b] : scene.polygon_offsets[b + 1]]
+        return np.abs((corners - point) @ normal).max() < 1e-9
+
+    def sides_overlap(a, b):
+        for p0, p1 in sides[a]:
+            u = (p1 - p0) / np.linalg.norm(p1 - p0)
+            for q0, q1 in sides[b]:
+                off0, off1 = q0 - p0, q1 - p0
+                if np.linalg.norm(np.cross(off0, u)) > 1e-9 or np.linalg.norm(np.cross(off1, u)) > 1e-9:
+                    continue
+                t0, t1 = sorted([off0 @ u, off1 @ u])
+                if min(t1, np.linalg.norm(p1 - p0)) - max(t0, 0.0) > 1e-9:
+                    return True
+        return False
+
+    label = list(range(n))
+
+    def root(x):
+        while label[x] != x:
+            x = label[x]
+        return x
+
+    joined = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            if scene.object_ids[a] != scene.object_ids[b] and one_plane(a, b) and sides_overlap(a, b):
+                label[root(a)] = root(b)
+                joined += 1
+    assert joined >= 4
+    for a in range(n):
+        for b in range(n):
+            assert (region[a] == region[b]) == (root(a) == root(b))
