@@ -755,7 +755,7 @@ def _flush_faces(ef_off, ef_face, face_region, split_edge, e, f):
 
 @njit_leaf
 def _coplanar_swath(vertices, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id, n, tol):
-    """Whether an EEE arc's three edges share a plane or two bound one face (or two faces stacked flush, see
+    """Whether an EEE arc's three edges share a plane or two bound one face (or faces of one flat region, see
     _flush_faces): the degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events.
     Two parallel edges and a third piercing their plane are one: the pencil of that plane about the piercing
     point (see _pivot), unless _aligned_pencil."""
@@ -2775,17 +2775,22 @@ def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: in
         element_solid = element_solids(scene, topology)
     if face_region is None:
         face_region = flat_regions(scene)
+    # faces of one flat region are looked for only from edges with a face in a region of several
+    shared_region = np.bincount(face_region, minlength=scene.n_polygons)[face_region] > 1
+    split_edge = _any_of(shared_region, scene.edge_face_offsets, scene.edge_faces)
     parts = max(1, min(_SLICES_PER_WORKER * int(workers), n // _MIN_SLICE))
     bounds = np.linspace(0, n, parts + 1).astype(np.int64)
     slices = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     if parts == 1:
-        results = [_validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, face_region, 0, n)]
+        results = [
+            _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, face_region, split_edge, 0, n)
+        ]
     else:
         with ThreadPoolExecutor(min(parts, int(workers))) as pool:
             results = list(
                 pool.map(
                     lambda b: _validate_slice(
-                        scene, topology, bvh, candidates, edge_mask, element_solid, face_region, *b
+                        scene, topology, bvh, candidates, edge_mask, element_solid, face_region, split_edge, *b
                     ),
                     slices,
                 )
@@ -2907,6 +2912,9 @@ def _boundaries_meet(points, offsets, normals, pairs, tol):
                     continue
                 if min(max(t0, t1), length) - max(min(t0, t1), 0.0) > tol:
                     result[k] = True
+                    break
+            if result[k]:
+                break
     return result
 
 
@@ -2919,11 +2927,11 @@ def _any_of(flag: np.ndarray, offsets: np.ndarray, items: np.ndarray) -> np.ndar
     return hits > 0
 
 
-def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, face_region, lo: int, hi: int):
+def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, face_region, split_edge, lo: int,
+                    hi: int):  # fmt: skip
     """validate_candidates on candidates[lo:hi] (node ids of the incidences local to the slice); element_solid:
-    element_solids(scene, topology); face_region: flat_regions(scene)."""
-    shared_region = np.bincount(face_region, minlength=scene.n_polygons)[face_region] > 1
-    split_edge = _any_of(shared_region, scene.edge_face_offsets, scene.edge_faces)
+    element_solids(scene, topology); face_region: flat_regions(scene); split_edge (E,) bool: the edges with a face
+    in a region of several."""
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
         topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
