@@ -1733,6 +1733,26 @@ def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_in
     )  # fmt: skip
 
 
+@njit_leaf
+def _angle_in_solid(geometry, line, scratch, group, into_a, into_b):
+    """Whether the points just inside the angle of unit directions into_a, into_b at the contact point of the
+    line's group `group` lie inside a solid touching that point (see _goes_into_solid; the group's contacts are
+    copied into scratch's contact rows)."""
+    g_ = geometry
+    polys, kinds, locals_ = scratch.polys, scratch.kinds, scratch.locals_
+    count = 0
+    for i in range(line.g_lo[group], line.g_hi[group]):
+        polys[count] = line.c_poly[i]
+        kinds[count] = line.c_kind[i]
+        locals_[count] = line.c_local[i]
+        count += 1
+    inward = _along(into_a, 1.0, into_b)
+    inward = _over(inward, np.sqrt(_dot(inward, inward)))
+    return _goes_into_solid(g_.points, g_.offsets, g_.normals, g_.object_ids, g_.corner_edge, g_.element_solid,
+                            g_.vertices.shape[0], polys, kinds, locals_, count, inward, g_.angle_tol,
+                            scratch.angles)  # fmt: skip
+
+
 @njit(cache=True)
 def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask,
                               ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
@@ -1775,6 +1795,10 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                 # objects touch there face against face (those of the edges, or a third one's face under both: a
                 # box stacked on another, its corner on the other's edge), such lines are inside the solids
                 if _sliding_faces_meet_in(g_, line, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
+                    continue
+                # or in a solid whose edge or corner is at the corner (two boxes stacked corner to corner beside
+                # a third box that reaches past both): the lines enter it at one edge and leave it at the other
+                if _angle_in_solid(g_, line, scratch, group_v, into_v, into_w):
                     continue
                 for k in range(ng):
                     if gk[k] != GEN_EDGE or \

@@ -796,6 +796,26 @@ def test_no_swath_in_the_plane_of_a_top_beside_the_top_it_continues():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
+def test_no_pencil_through_a_box_beside_two_boxes_meeting_corner_to_corner():
+    """bench closed_furnished_room(3) cut down to four boxes: a box with a top corner at the bottom corner of a box
+    stacked beside it, on a wide box that both touch (the first against its side, the second on its top), and a
+    box beside the first with a bottom edge through the first's bottom corner. Lines in the plane of the first
+    box's side meeting its vertical edge at that corner and the stacked box's bottom edge there run, between the
+    two edges, inside the wide box: no arc holds both edges (one had a node at the diagonal of that side and
+    none at its other end)."""
+    scene = boxes_in_room(
+        [((1.4, 0.55, 0.45), (1.7, 0.85, 1.0)), ((1.2, 0.85, 0.45), (2.15, 1.3, 1.0)),
+         ((1.4, 0.85, 1.0), (2.15, 1.3, 1.2)), ((1.3, 0.05, 0.45), (1.85, 0.55, 1.0))],
+        size=(3.25, 3.7, 3.05),
+    )  # fmt: skip
+    skeleton = build_skeleton(scene)
+    nv = scene.n_vertices
+    (vertical,) = _edges_between(scene, (1.4, 0.85, 0.45), (1.4, 0.85, 1.0))
+    (bottom,) = _edges_between(scene, (1.4, 0.85, 1.0), (1.4, 1.3, 1.0))
+    assert not any(vertical + nv in codes and bottom + nv in codes for codes in skeleton.arcs.codes)
+    assert skeleton.stats["dangling_arcs"] == 0
+
+
 def test_arcs_along_a_seam_end_at_a_corner_on_it():
     """Two boxes side by side and a lower one against both (office-432's crates): the lower box's top corner lies
     on the seam of the two others' collinear vertical edges. The lines through a vertex meeting either edge of
