@@ -708,8 +708,6 @@ def test_no_swath_through_the_upper_of_two_stacked_boxes_from_a_flush_edge():
     assert skeleton.stats["dangling_arcs"] == 0
 
 
-
-
 def test_no_swath_through_a_box_standing_flush_beside_the_edge_that_stops_it():
     """bench closed_furnished_room(22) cut down to three boxes: as above, but the box over the lower one's top
     edge stands beside it, not on it (flush with that edge), so the lines reaching the edge from the crossing go
@@ -727,6 +725,7 @@ def test_no_swath_through_a_box_standing_flush_beside_the_edge_that_stops_it():
     swath = {scene.n_vertices + e for e in (lower_top, beside_top, front)}
     assert not any(set(codes.tolist()) == swath for codes in skeleton.arcs.codes)
     assert skeleton.stats["dangling_arcs"] == 0
+
 
 def test_no_pencil_arcs_between_touching_faces_past_a_crossing():
     """bench closed_furnished_room(25) cut down to three boxes: two boxes touch face to face (a box beside
@@ -748,6 +747,7 @@ def test_no_pencil_arcs_between_touching_faces_past_a_crossing():
     assert len(arcs) == 1
     assert (skeleton.arcs.node[arcs[0]] >= 0).all()
     assert skeleton.stats["dangling_arcs"] == 0
+
 
 def test_no_swath_in_the_plane_of_faces_stacked_flush():
     """bench closed_furnished_room(5) cut down to three boxes: a box stacked on another with the same footprint
