@@ -220,7 +220,7 @@ def _by_key_then_s(kind, codes, s) -> np.ndarray:
     return order
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _runs_by_s(order, key, s):
     """Sort each run of equal key[order] (M,) int64 in `order` (M,) int32 by s (M,) float64, stably, NaN last
     as np.lexsort puts it: most runs are a handful of incidences, sorted by insertion in place."""
@@ -259,7 +259,7 @@ def _same_key(kind, codes, i, j):
             and codes[i, 2] == codes[j, 2])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node):
     """The incidences sorted by key then s (`order` (M,) int32), reordered so that within each run of
     coordinates closer than the tolerance to the run's first the ends (direction -1) come before the starts;
@@ -300,7 +300,7 @@ def _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node):
     return order[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _count_arcs(order, kind, codes, direction):
     """How many arcs `_pair` makes of the incidences in `order`."""
     count = 0
@@ -320,7 +320,7 @@ def _count_arcs(order, kind, codes, direction):
     return count + (1 if pending else 0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pair(order, kind, codes, end, direction, s, node, n_arcs):
     """The arcs (fields of Arcs, planar ends not spread yet): each incidence in `order` that starts an arc
     paired with the next one ending it, if of the same key; an incidence left alone is a dangling arc."""

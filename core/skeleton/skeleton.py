@@ -730,29 +730,43 @@ _PROBED_AT_ONCE = 1 << 16
 
 #: incidences assembled into arcs at a time (see _arcs_by_key_range)
 _ASSEMBLED_AT_ONCE = 1 << 20
+#: fewer incidences than this are assembled on one thread (a thread's start costs more than it saves)
+_ASSEMBLED_ON_ONE_THREAD = 1 << 15
 
 
 def _arcs_by_key_range(parts: list, node_id, edge_tol, n_vertices: int, n_edges: int, release: bool) -> Arcs:
     """The arcs (core.skeleton.graph.assemble_arcs) of the incidences of `parts` (IncidenceChunk, their node
-    ids mapped through node_id (N,) int32), assembled for one range of keys (kind, first generator) at a time:
-    arcs are sorted by their key first, so the pieces joined in order are the arcs of all incidences at once.
-    When `release`, `parts` is emptied (see _pieces_by_key_range): all incidences, their sort and all arcs at
-    once would set the peak memory of a build."""
+    ids mapped through node_id (N,) int32), assembled for one range of keys (kind, first generator) at a time on
+    each of WORKERS threads: arcs are sorted by their key first, so the pieces joined in order are the arcs of
+    all incidences at once. When `release`, `parts` is emptied (see _pieces_by_key_range): all incidences, their
+    sort and all arcs at once would set the peak memory of a build."""
     n_codes = n_vertices + n_edges
     counts = np.zeros(len(ARC_NAMES) * n_codes, dtype=np.int64)
     for part in parts:
         counts += np.bincount(_key_prefix(part, n_codes), minlength=len(counts))
     cumulative = np.concatenate([[0], np.cumsum(counts)])
-    pieces = max(1, -(-int(cumulative[-1]) // _ASSEMBLED_AT_ONCE))
+    total = int(cumulative[-1])
+    # a range per thread at least: the assembly's kernels release the GIL
+    pieces = max(1, -(-total // _ASSEMBLED_AT_ONCE), min(WORKERS, total // _ASSEMBLED_ON_ONE_THREAD))
     bounds = np.unique(np.searchsorted(cumulative, np.linspace(0, cumulative[-1], pieces + 1)[1:-1]))
     bounds = np.array([0, *bounds.tolist(), len(counts)], dtype=np.int64)
-    arcs = []
-    for piece in _pieces_by_key_range(parts, bounds, n_codes, release):
-        arcs.append(assemble_arcs(
+
+    def assembled(piece):
+        return assemble_arcs(
             piece.kind, piece.codes, piece.end, piece.s, piece.direction, node_id[piece.node], edge_tol, n_vertices,
-        ))  # fmt: skip
-        del piece
-        _return_free_memory()
+        )  # fmt: skip
+
+    arcs = []
+    with ThreadPoolExecutor(WORKERS) as pool:
+        running = []
+        # at most one range per thread in hand: the incidences of the others wait unsorted
+        for piece in _pieces_by_key_range(parts, bounds, n_codes, release):
+            running.append(pool.submit(assembled, piece))
+            del piece
+            if len(running) == WORKERS:
+                arcs.append(running.pop(0).result())
+                _return_free_memory()
+        arcs.extend(future.result() for future in running)
     return _concatenated(Arcs, arcs)
 
 
