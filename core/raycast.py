@@ -763,7 +763,7 @@ def _contacts_batch(
     return csr, polygon, t, kind, local, blocked
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _first_hits_batch(
     points, offsets, normals, plane_offsets,
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,

@@ -1150,11 +1150,16 @@ def test_nodes_merged_within_each_chunk_give_the_skeleton_merged_at_the_end(name
 
 
 @pytest.mark.parametrize("name", ["furnished room 0", "lamp table"])
-def test_probes_cast_in_batches_are_those_cast_at_once(name, monkeypatch):
-    """The probed pieces' rays cast a hundred at a time see what they see cast all at once."""
+@pytest.mark.parametrize("sides_at_once", [False, True])
+def test_probes_cast_in_batches_are_those_cast_at_once(name, sides_at_once, monkeypatch):
+    """The probed pieces' rays cast a hundred at a time, the two sides of each batch in turn or on two threads at
+    once, see what they see cast all at once on one thread."""
     whole = _skeleton(name)
     assert len(whole._probes.s) > 3 * 100
+    assert len(whole._probes.s) < skeleton_module._PROBED_ON_ONE_THREAD
     monkeypatch.setattr(skeleton_module, "_PROBED_AT_ONCE", 100)
+    if sides_at_once:
+        monkeypatch.setattr(skeleton_module, "_PROBED_ON_ONE_THREAD", 0)
     batched = build_skeleton(_scene(name))
     for field in ("offsets", "s", "node", "seen"):
         expected = getattr(whole._probes, field)
