@@ -577,9 +577,7 @@ class Skeleton:
         arc = _arc_of_pieces(offsets)
         seen = np.full((len(arc), 2), -1, dtype=np.int32)
 
-        def probe_side(lo: int, hi: int, column: int) -> None:
-            vertex = arcs.codes[arc[lo:hi], 0].astype(np.int64)
-            edge = (arcs.codes[arc[lo:hi], 1] - nv).astype(np.int64)
+        def probe_side(lo: int, hi: int, vertex, edge, apex, column: int) -> None:
             side = 1.0 if column == 0 else -1.0
             directions = _probe_directions(
                 vertex, edge, piece_s[lo:hi], scene.vertices, scene.edges, side * _PROBE_LENGTHS * scene.tol.length,
@@ -590,7 +588,7 @@ class Skeleton:
                 self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
                 scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
             )  # fmt: skip
-            polygon, _, _ = first_hits(scene, self.bvh, scene.vertices[vertex], directions)
+            polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
             hit = np.flatnonzero(free & (polygon >= 0))
             seen[lo + hit, column] = topo.face_group[polygon[hit]]
 
@@ -601,7 +599,10 @@ class Skeleton:
             for lo in range(0, len(arc), _PROBED_AT_ONCE):
                 _return_free_memory()
                 hi = min(lo + _PROBED_AT_ONCE, len(arc))
-                for done in [pool.submit(probe_side, lo, hi, column) for column in (0, 1)]:
+                vertex = arcs.codes[arc[lo:hi], 0].astype(np.int64)
+                edge = (arcs.codes[arc[lo:hi], 1] - nv).astype(np.int64)
+                apex = scene.vertices[vertex]
+                for done in [pool.submit(probe_side, lo, hi, vertex, edge, apex, column) for column in (0, 1)]:
                     done.result()
         return Probes(offsets, piece_s, piece_node, seen)
 
