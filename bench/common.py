@@ -4,7 +4,9 @@ import json
 import os
 import platform
 import resource
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 RESULTS = Path(__file__).parent / "results"
@@ -25,6 +27,28 @@ def machine() -> dict:
         "python": platform.python_version(),
         "system": platform.platform(),
     }
+
+
+def thread_throughput(work: Callable[[], object], threads: int, repeats: int = 3) -> float:
+    """How many times the work of one thread `threads` threads get done in the same wall time: `work` timed
+    alone, then `threads` copies of it started together (best of `repeats` each), threads x alone / together.
+    `work` must release the GIL (a nogil numba kernel) to measure the cores: 2.0 from two cores of their own,
+    less where two vCPUs share one core's execution units, 1.0 for work serialised by the GIL."""
+    if threads < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+
+    def wall(copies: int) -> float:
+        runners = [threading.Thread(target=work) for _ in range(copies)]
+        start = time.perf_counter()
+        for runner in runners:
+            runner.start()
+        for runner in runners:
+            runner.join()
+        return time.perf_counter() - start
+
+    alone = min(wall(1) for _ in range(repeats))
+    together = min(wall(threads) for _ in range(repeats))
+    return threads * alone / together
 
 
 def peak_memory_bytes() -> int:

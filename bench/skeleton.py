@@ -5,7 +5,10 @@ keys skel.stats reports), skeleton bytes (skel.stats['bytes']), peak resident me
 above the resident memory before it (python, numba, the scene), and the paper's Table 1 row at that size (time
 on a 195 MHz R10000, memory, thousands of nodes and arcs) with our speed-up; the build's CPU seconds (all threads)
 and its CPU microseconds per node, beside what the 30x target leaves per node on this machine's cores (Table 1's
-time over 30, times the cores, over our nodes): where the target is missed, how much cheaper a node must get.
+time over 30, times the cores, over our nodes): where the target is missed, how much cheaper a node must get;
+and how many times one thread's work the cores do at once (a register-only numba loop alone, then on every core),
+measured after the builds: the core count on a quiet machine, less when another job shared the cores during the
+run (or vCPUs share a physical core), which makes the run's times too slow to compare with others.
 Then the growth exponent of time against polygons (least squares on log-log; the paper: n^2.4), the lazy build
 from one source (the first light) against the full build on the largest size (paper, 1488 polygons: 4 min 15 s
 against 31 min 59 s), and on that skeleton the query costs: form_factor and visible_boundary per vertex view,
@@ -31,8 +34,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
-from .common import Stopwatch, peak_memory_bytes, print_table, write_results
+from .common import Stopwatch, peak_memory_bytes, print_table, thread_throughput, write_results
 from .scenes import OFFICE_SIZES, SCENES, closed_furnished_room
 
 #: seed 003, Table 1: polygons -> (construction seconds, memory MB, nodes x 1000, arcs x 1000)
@@ -53,9 +57,38 @@ MEMORY_TARGET_MB = 416.0
 CORES = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 """The cores this process may run on: what the 30x target leaves per node is counted on all of them."""
 
+THROUGHPUT_STEPS = 5_000_000
+"""Iterations of the calibration loop (about 0.1 s on one thread of a 2.6 GHz AMD EPYC)."""
+
 MB = 2.0**20
 _STATUS = Path("/proc/self/status")
 _CLEAR_REFS = Path("/proc/self/clear_refs")
+
+
+@njit(cache=True, nogil=True)
+def _calibration_loop(steps: int) -> float:
+    """Floating-point work with a data-dependent branch and a square root, in the manner of the skeleton's
+    geometric tests, on registers only (no memory traffic): what the cores give, not the memory bus."""
+    x, y, z = 0.3, 0.5, 0.7
+    total = 0.0
+    for _ in range(steps):
+        cx = y * 0.7 - z * 0.5
+        cy = z * 0.3 - x * 0.7
+        cz = x * 0.5 - y * 0.3
+        length = np.sqrt(cx * cx + cy * cy + cz * cz) + 1.0
+        if cx > cy:
+            total += cx / length
+        else:
+            total -= cy / length
+        x, y, z = y, z, x + 1e-9 * total
+    return total
+
+
+def cores_throughput(threads: int = CORES) -> float:
+    """How many times one thread's work `threads` threads of this machine do at once (bench.common's
+    thread_throughput on _calibration_loop): CORES when each thread has a core to itself."""
+    _calibration_loop(1)
+    return thread_throughput(lambda: _calibration_loop(THROUGHPUT_STEPS), threads)
 
 
 def _reset_peak() -> bool:
@@ -467,6 +500,9 @@ def main(argv) -> int:
     print_table(table, ["polygons", "seconds", "cpu_seconds", "nodes_total", "cpu_us_per_node",
                         "target_cpu_us_per_node", "speed_up"],
                 title=f"CPU per node, and what {SPEED_UP_TARGET:.0f}x Table 1 leaves per node on {CORES} cores")
+    throughput = cores_throughput()
+    print(f"{CORES} threads of this machine do {throughput:.2f}x the work of one (a nogil numba loop on registers"
+          f"{'' if throughput > 0.9 * CORES else ': another job shares the cores, these times are too slow'})")
     exponent = growth_exponent(rows)
     print(f"growth of construction time: n^{exponent:.2f} (paper: n^2.4); numba warm-up {warm_up.seconds:.1f} s")
 
@@ -501,5 +537,6 @@ def main(argv) -> int:
     write_results(
         "skeleton", rows, growth_exponent=exponent, lazy=lazy, queries=queries, targets=targets,
         warm_up_seconds=warm_up.seconds, paper_table_1=PAPER_TABLE_1, per_build_peak=_reset_peak(),
+        cores=CORES, cores_throughput=throughput,
     )
     return 0
