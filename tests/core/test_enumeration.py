@@ -769,3 +769,90 @@ def test_vee_pairs_off_a_plane_are_those_no_line_meets(size):
         tried += 1
     assert met > 1000
     assert off == tried > 2000
+
+
+# E4 targets across the source edge from its faces: every line through both pierces it
+
+
+@pytest.mark.parametrize("size", [1e-3, 1.0, 1e4])
+def test_targets_declared_pierced_meet_only_lines_that_pierce_the_source(size):
+    """_target_pierces against _edge_pierced on sampled lines. Edge e has two faces at a random dihedral angle
+    (every seventh edge a third face); target f lies anywhere around it: at random, parallel to e, passing within
+    1e-9 to 1e-5 of the scene from e's line, with both ends a few tol to 1e-6 of the scene across the plane of e
+    and one face, or beyond an end of e nearly on its line (1e-9 to 3e-7 of the scene off it, in the wedge
+    across e from its faces: lines from e to it run nearly along e). Whenever f is declared pierced, every line
+    through a point of e (ends included) and a point within 2 tol of f (its ends grown by 2 tol) pierces e as
+    _edge_pierced decides. And it bites: a short target in the wedge across e from both faces always is
+    declared pierced."""
+    from core.skeleton.enumeration import _edge_pierced, _target_pierces
+
+    rng = np.random.default_rng(17)
+    scale = np.sqrt(3.0) * size
+    tol = 1e-9 * scale
+    delta = 16.0 * tol / scale
+    edges = np.array([[0, 1], [2, 3]], dtype=np.int64)
+    declared = lines = across = 0
+    for trial in range(1500):
+        frame, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        along, side_a, side_b = frame
+        centre = np.full(3, 0.5 * size)
+        half = rng.uniform(0.02, 0.3) * size
+        first = rng.uniform(0.0, 2.0 * np.pi)
+        dihedral = rng.uniform(0.05, np.pi - 0.05)
+        angles = [first, first + dihedral] + ([rng.uniform(0.0, 2.0 * np.pi)] if trial % 7 == 0 else [])
+        inward = np.array([np.cos(t) * side_a + np.sin(t) * side_b for t in angles])
+        ef_off = np.array([0, len(angles), len(angles)], dtype=np.int64)
+        mode = trial % 5
+        away = -(inward[0] + inward[1])
+        away /= np.linalg.norm(away)
+        if mode == 0:
+            ends = centre + rng.uniform(-0.5, 0.5, (2, 3)) * size
+        elif mode == 1:
+            middle = centre + rng.uniform(-0.4, 0.4, 3) * size
+            length = rng.uniform(0.01, 0.3) * size
+            ends = np.array([middle - length * along, middle + length * along])
+        elif mode == 2:
+            aside = np.cross(along, rng.normal(size=3))
+            aside *= 10.0 ** rng.uniform(-9.0, -5.0) * scale / np.linalg.norm(aside)
+            through = centre + rng.uniform(-2.0, 2.0) * half * along + aside
+            tilt = rng.normal(size=3)
+            tilt /= np.linalg.norm(tilt)
+            reach = rng.uniform(0.0, 0.3, 2) * size
+            ends = np.array([through - reach[0] * tilt, through + reach[1] * tilt])
+        elif mode == 3:
+            start = centre + rng.choice([-1.0, 1.0]) * (half + rng.uniform(0.0, 0.2) * size) * along
+            start += 10.0 ** rng.uniform(-9.0, -6.5) * scale * away
+            tilt = along + 10.0 ** rng.uniform(-9.0, -6.0) * away
+            ends = np.array([start, start + rng.uniform(0.01, 0.3) * size * tilt / np.linalg.norm(tilt)])
+        else:
+            # both ends just across the plane of e and face 0, on the side away from the face's inside
+            normal = np.cross(along, inward[0])
+            normal *= -np.sign(normal @ inward[1]) if abs(normal @ inward[1]) > 1e-3 else 1.0
+            lifts = 10.0 ** rng.uniform(0.0, 3.0, 2) * tol
+            in_plane = rng.uniform(-0.4, 0.4, (2, 2)) * size
+            ends = centre + in_plane[:, :1] * along + in_plane[:, 1:] * inward[0] + lifts[:, None] * normal
+        vertices = np.array([centre - half * along, centre + half * along, *ends])
+        if _target_pierces(0, 1, vertices, edges, ef_off, inward, delta, tol):
+            declared += 1
+            target = ends[1] - ends[0]
+            grown = 2.0 * tol / max(np.linalg.norm(target), tol)
+            for k in range(40):
+                s = (0.0, 1.0)[k % 2] if k < 8 else rng.uniform(0.0, 1.0)
+                w = (-grown, 1.0 + grown)[(k // 2) % 2] if k < 8 else rng.uniform(-grown, 1.0 + grown)
+                offset = rng.normal(size=3)
+                offset *= rng.uniform(0.0, 1.0) * 2.0 * tol / np.linalg.norm(offset)
+                point = ends[0] + w * target + offset
+                direction = point - vertices[0] - s * (vertices[1] - vertices[0])
+                direction /= np.linalg.norm(direction)
+                assert _edge_pierced(0, direction, vertices, edges, ef_off, inward, delta), (trial, mode, k)
+                lines += 1
+        if len(angles) == 2 and dihedral < np.pi - 0.3:
+            middle = centre + rng.uniform(-0.5, 0.5) * half * along + rng.uniform(0.1, 0.4) * size * away
+            spread = rng.normal(size=3)
+            spread *= 1e-3 * size / np.linalg.norm(spread)
+            vertices[2:] = [middle - spread, middle + spread]
+            assert _target_pierces(0, 1, vertices, edges, ef_off, inward, delta, tol), trial
+            across += 1
+    assert declared > 300
+    assert lines == 40 * declared
+    assert across > 1000
