@@ -81,11 +81,12 @@ from .validation import WORKERS, _shared_face
 DEFAULT_CHUNK = 100_000
 """Largest number of candidates in one yielded chunk by default (about one second of validation)."""
 
-MIN_CELLS = 3
+MIN_CELLS = 1
 MAX_CELLS = 15
-"""Cells per side of each cube-map face, between these: 3 cells**2 line directions (a line and its opposite share
-one). Finer cells prune more but repeat the work of every pair of targets the cells share; the best count grows
-with the scene (_cells_per_side)."""
+EDGES_PER_CELL = 230.0
+"""Cells per side of each cube-map face, between MIN_CELLS and MAX_CELLS: 3 cells**2 line directions (a line and
+its opposite share one). Finer cells prune more but repeat the work of every pair of targets the cells share;
+the best count grows with the scene, about one cell per side per EDGES_PER_CELL masked edges (_cells_per_side)."""
 
 BIN_CELLS = 0.4
 """An edge source is cut into bins no longer than this fraction of the scene diagonal over the cells per side
@@ -168,7 +169,7 @@ def iter_candidates(
     crossings = _edge_crossings(emask, g.vertices, g.edges, g.tol)
     # E4 lines of the edge phase through a crossing of two of their edges, by their four edges: the crossing
     # transversals proposes them all and keeps only the others
-    through_crossings: set[tuple[int, ...]] = set()
+    through_crossings: dict[tuple[int, ...], list] = {}
     n_cells = 3 * cells * cells
     vertex_depth = np.full((scene.n_vertices, 2, n_cells), np.inf)
     pending: NodeCandidates | None = None
@@ -237,7 +238,7 @@ def iter_candidates(
         done += weights[index]
         after = done / total
         if found is not None and steps[index][0] == "edge" and len(crossings[0]):
-            through_crossings.update(_lines_through_crossings(found, crossings, len(scene.edges), g.tol))
+            found = _once_through_crossings(found, crossings, len(scene.edges), g.tol, g.scale, through_crossings)
         if found is not None and steps[index][0] == "crossing transversal":
             found = _not_proposed(found, through_crossings)
         if found is not None and len(found[0]):
@@ -373,15 +374,17 @@ class _Geometry:
 
 
 def _cells_per_side(n_edges: int) -> int:
-    """Cube-map cells per side for a scene of n_edges masked edges: the odd count nearest sqrt(n_edges) / 4,
+    """Cube-map cells per side for a scene of n_edges masked edges: the odd count nearest n_edges / EDGES_PER_CELL,
     within [MIN_CELLS, MAX_CELLS]. Odd, so that the axis directions lie inside cells, not on their borders:
     the lines in the planes of axis-aligned faces (most of a furnished room) would otherwise fall on a border,
-    and their targets register in the cells on both sides. Measured on the office family (E4 enumeration, one
-    thread, with 8 / 12 / 14 even cells before): 5 cells against 8 save 31 % at 84 polygons, 20 % at 168;
-    7 save 17 % at 312 and 15 % at 432; 11 against 12 save 17 % at 1056, 13 against 14 save 18 % at 1488.
-    3 against 5 at 84 polygons (180 edges; AMD EPYC, 2026-11-27): E4 98 -> 80 ms on one thread, the whole
-    build 0.211 -> 0.200 s (medians of 15), the same nodes and arcs."""
-    return int(np.clip(2 * (np.sqrt(n_edges) / 4.0 // 2) + 1, MIN_CELLS, MAX_CELLS))
+    and their targets register in the cells on both sides. Finer cells prune more pairs of targets but cost
+    more occlusion maps and register each target in more cells; with the enumeration's other prunes the small
+    scenes gain from coarse cells. Whole builds of the office family (AMD EPYC, 2 threads, medians, 2026-11-28),
+    this rule's count against the earlier sqrt(n_edges) / 4 one: 84 polygons (180 edges) 1 against 3 cells
+    0.200 / 0.216 s; 168 (348) 1 against 5 0.654 / 0.691 s; 312 (636) 3 against 7 2.17 / 2.15 s; 432 (876) 3
+    against 7 3.82 / 4.05 s; 756 (1524) 7 against 9 11.96 / 12.05 s; 1056 (2124) 9 against 11 23.8 / 23.6 s;
+    1488 (2988) 13 either way. The same nodes and arcs at every size."""
+    return int(np.clip(2 * (n_edges / EDGES_PER_CELL // 2) + 1, MIN_CELLS, MAX_CELLS))
 
 
 def _convex_objects(scene: Scene, margin: float):
@@ -2786,28 +2789,56 @@ def _share_vertex(edges, f, g):
 # lines through the crossing of two edges: in their plane (FXE) and across it (E4 with a crossing pair)
 
 
-def _lines_through_crossings(found, crossings, n_edges: int, tol: float) -> set[tuple[int, ...]]:
-    """The four edges of the E4 candidates in `found` (NodeCandidates fields) with two edges crossing (crossings:
-    _edge_crossings) whose line passes through that crossing (within 4 tol)."""
+def _once_through_crossings(found, crossings, n_edges: int, tol: float, scale: float, proposed: dict):
+    """`found` (NodeCandidates fields) without the E4 candidates through a crossing whose line is already in
+    `proposed` (four edges -> list of (origin, unit direction)), which gains the lines of those kept. A candidate
+    is through a crossing when two of its edges cross (crossings: _edge_crossings) and its line passes through
+    that point (within 4 tol). The edge phase may find such a line from either crossing edge: they meet it at one
+    point, so which of them is inner, and on which side, is a matter of rounding. Two lines are the same when the
+    points of each at its origin and a scene size (scale) along it lie within 4 tol of the other."""
     kind, _, edges, origin, direction = found
     pairs, points, _ = crossings
     keys = pairs[:, 0] * n_edges + pairs[:, 1]
     order = np.argsort(keys)
     rows = np.flatnonzero(kind == CANDIDATE_E4)
-    result = set()
+    through = np.zeros(len(kind), dtype=bool)
     for i in range(4):
         for j in range(i + 1, 4):
             pair_keys = edges[rows, i] * n_edges + edges[rows, j]
             slot = np.minimum(np.searchsorted(keys, pair_keys, sorter=order), len(keys) - 1)
             match = keys[order[slot]] == pair_keys
             for row, k in zip(rows[match], order[slot[match]], strict=True):
-                offset = points[k] - origin[row]
-                if np.linalg.norm(offset - (offset @ direction[row]) * direction[row]) <= 4.0 * tol:
-                    result.add(tuple(edges[row].tolist()))
-    return result
+                if _off_line(points[k], origin[row], direction[row]) <= 4.0 * tol:
+                    through[row] = True
+    keep = np.ones(len(kind), dtype=bool)
+    for row in np.flatnonzero(through):
+        lines = proposed.setdefault(tuple(edges[row].tolist()), [])
+        line = (origin[row], direction[row])
+        keep[row] = not any(_same_line(line, other, scale, 4.0 * tol) for other in lines)
+        if keep[row]:
+            lines.append(line)
+    if keep.all():
+        return found
+    return tuple(column[keep] for column in found)
 
 
-def _not_proposed(found, proposed: set[tuple[int, ...]]):
+def _same_line(a: tuple, b: tuple, scale: float, within: float) -> bool:
+    """Whether lines a and b, each (origin (3,), unit direction (3,)), are one: the points of each at its origin
+    and `scale` along it lie `within` of the other."""
+    return all(
+        _off_line(origin + along * direction, *other) <= within
+        for (origin, direction), other in ((a, b), (b, a))
+        for along in (0.0, scale)
+    )
+
+
+def _off_line(point: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> float:
+    """The distance from a point (3,) to the line through origin (3,) along the unit direction (3,)."""
+    offset = point - origin
+    return float(np.linalg.norm(offset - (offset @ direction) * direction))
+
+
+def _not_proposed(found, proposed: dict):
     """The candidates of `found` (NodeCandidates fields) whose edges are not in `proposed`."""
     keep = np.array([tuple(row) not in proposed for row in found[2].tolist()], dtype=bool)
     return tuple(column[keep] for column in found)

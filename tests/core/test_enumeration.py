@@ -604,14 +604,15 @@ def test_clip_to_face_equals_clipping_every_polygon():
 
 
 @pytest.mark.parametrize("name", ["generic room 2", "team room"])
-def test_depth_map_culls_lose_no_bound(name):
+@pytest.mark.parametrize("cells", [1, 3, 7])
+def test_depth_map_culls_lose_no_bound(name, cells):
     """The polygons and objects _depth_map skips (narrower than any cell's patch, seen under less than a cell,
     off an axis's faces) would have lowered no bound: the maps of every vertex, and of every edge cut in four
-    bins, equal those made with every cull off (infinite widths and object radii, a zero half angle)."""
+    bins, equal those made with every cull off (infinite widths and object radii, a zero half angle). With the
+    cells of small scenes (one per cube face: these rooms get that) and finer ones."""
     from core.skeleton import enumeration as E
 
     scene = SCENES[name]()
-    cells = E._cells_per_side(len(scene.edges))
     g = E._Geometry(scene, cells)
     n_cells = 3 * cells * cells
     none = np.empty(0, dtype=np.int64)
@@ -635,7 +636,7 @@ def test_depth_map_culls_lose_no_bound(name):
             edge_maps.append(depth)
         maps.append((out, np.array(edge_maps)))
     (vertex_culled, edge_culled), (vertex_all, edge_all) = maps
-    assert np.isfinite(vertex_all).mean() > 0.2 and np.isfinite(edge_all).mean() > 0.2
+    assert np.isfinite(vertex_all).mean() > 0.1 and np.isfinite(edge_all).mean() > 0.1
     np.testing.assert_array_equal(vertex_culled, vertex_all)
     np.testing.assert_array_equal(edge_culled, edge_all)
 
