@@ -239,6 +239,34 @@ def test_lines_from_a_vertex_through_a_crossing_of_edges_are_proposed():
     assert through_crossings
 
 
+@pytest.mark.parametrize("cells", [1, 3, 5])
+def test_lines_through_a_crossing_are_proposed_once(monkeypatch, cells):
+    """An E4 line through the crossing of two of its edges may be kept from either crossing edge (they meet it
+    at one point): whatever the cube-map cells, it is proposed once, and the lines validation keeps from the
+    candidates are those it keeps from every candidate found from every source edge."""
+    from core.skeleton import enumeration as E
+
+    monkeypatch.setattr(E, "_cells_per_side", lambda n_edges: cells)
+    scene = _overhanging_boxes()
+    candidates = fast(scene)
+    assert max(line_keys(candidates).values()) == 1, "a candidate proposed twice"
+    crossings = _edge_crossings(scene, generator_masks(scene)[1])
+    tol = scene.tol.length
+    e4 = np.flatnonzero(candidates.kind == CANDIDATE_E4)
+    through = [
+        c for c in e4 for e, f, point, _ in crossings
+        if {e, f} <= set(candidates.edges[c].tolist()) and np.linalg.norm(
+            np.cross(point - candidates.origin[c], candidates.direction[c])) <= 4.0 * tol
+    ]  # fmt: skip
+    assert through, "no E4 line through a crossing: the scene tests nothing"
+    with_duplicates = E._once_through_crossings
+    monkeypatch.setattr(E, "_once_through_crossings", lambda found, *args: found)
+    everything = fast(scene)
+    monkeypatch.setattr(E, "_once_through_crossings", with_duplicates)
+    assert len(everything) >= len(candidates)
+    assert set(accepted(scene, everything)) == set(accepted(scene, candidates))
+
+
 def test_lines_in_the_plane_of_a_crossing_through_an_edge_across_it_are_proposed():
     """FXE candidates (seed 003's FvE node, the crossing of two edges standing for the vertex): for each crossing
     and each edge strictly across the two edges' plane, the line in that plane through the crossing and the
