@@ -45,6 +45,25 @@ def test_cpu_per_node_counts_every_thread_and_the_budget_follows_table_1():
     assert row["target_cpu_us_per_node"] == pytest.approx(1e6 * PAPER_TABLE_1[84][0] / SPEED_UP_TARGET * CORES / nodes)
 
 
+def test_repeated_builds_report_the_median_build_and_the_largest_peak():
+    """Three builds of one size idling 0.05, 0.9 and 0.2 s: the row's seconds are the middle one's (not the
+    mean, not the first), the fastest and slowest are kept, and a bad repeat count is refused."""
+    idles = iter([0.05, 0.9, 0.2])
+
+    def varying_build(scene, sources=None, progress=None):
+        time.sleep(next(idles))
+        return _StubSkeleton()
+
+    rows, (_, _, _, largest_seconds) = construction(varying_build, [84], show_progress=False, repeats=3)
+    row = rows[0]
+    assert row["builds"] == 3
+    assert 0.2 <= row["seconds"] < 0.3 and largest_seconds == row["seconds"]
+    assert 0.05 <= row["seconds_min"] < 0.15 and 0.9 <= row["seconds_max"] < 1.0
+    assert row["speed_up"] == pytest.approx(PAPER_TABLE_1[84][0] / row["seconds"])
+    with pytest.raises(ValueError, match="repeats"):
+        construction(varying_build, [84], show_progress=False, repeats=0)
+
+
 FIRST_CALL_SECONDS = 0.03
 
 
