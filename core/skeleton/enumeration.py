@@ -167,8 +167,9 @@ def iter_candidates(
 
     g = geometry
     crossings = _edge_crossings(emask, g.vertices, g.edges, g.tol)
-    # E4 lines of the edge phase through a crossing of two of their edges, by their four edges: the crossing
-    # transversals proposes them all and keeps only the others
+    # E4 lines of the edge phase through a crossing of two of their edges, their lines by their four edges: the
+    # edge phase proposes each once (_once_through_crossings); the crossing transversals propose them all and keep
+    # only the others
     through_crossings: dict[tuple[int, ...], list] = {}
     n_cells = 3 * cells * cells
     vertex_depth = np.full((scene.n_vertices, 2, n_cells), np.inf)
