@@ -1528,18 +1528,27 @@ def _new_output(capacity):
 
 
 @njit(cache=True)
-def _push(out, count, kind, v0, v1, e0, e1, e2, e3, origin, d):
-    """Append one candidate (edges already sorted, -1 last); returns the (maybe regrown) output."""
+def _grown_output(out, count):
+    """(output with room for twice as many candidates, the first `count` copied; its capacity)."""
+    capacity = 2 * count + 64
+    bigger = _new_output(capacity)
+    bigger[0][:count] = out[0][:count]
+    bigger[1][:count] = out[1][:count]
+    bigger[2][:count] = out[2][:count]
+    bigger[3][:count] = out[3][:count]
+    bigger[4][:count] = out[4][:count]
+    return bigger, capacity
+
+
+# Candidates are written by leaf kernels into room the caller makes (`_grown_output` when count reaches its
+# capacity, kept as a number): a kernel taking and returning the output tuple counted a reference to each of its
+# five arrays at entry and exit, and reading a capacity off it one more, for every candidate
+
+
+@njit_leaf
+def _write(out, count, kind, v0, v1, e0, e1, e2, e3, origin, d):
+    """Write candidate `count` (edges already sorted, -1 last) into the output, which has room for it."""
     o_kind, o_vert, o_edge, o_origin, o_dir = out
-    if count == o_kind.shape[0]:
-        bigger = _new_output(2 * count + 64)
-        bigger[0][:count] = o_kind
-        bigger[1][:count] = o_vert
-        bigger[2][:count] = o_edge
-        bigger[3][:count] = o_origin
-        bigger[4][:count] = o_dir
-        out = bigger
-        o_kind, o_vert, o_edge, o_origin, o_dir = out
     o_kind[count] = kind
     o_vert[count, 0] = v0
     o_vert[count, 1] = v1
@@ -1550,19 +1559,18 @@ def _push(out, count, kind, v0, v1, e0, e1, e2, e3, origin, d):
     for c in range(3):
         o_origin[count, c] = origin[c]
         o_dir[count, c] = d[c]
-    return out
 
 
-@njit(cache=True)
-def _push_edges(out, count, kind, e0, e1, e2, e3, origin, d):
-    """Append a candidate of four edge generators (E4, FEE), given in any order; returns the output."""
+@njit_leaf
+def _write_edges(out, count, kind, e0, e1, e2, e3, origin, d):
+    """_write of a candidate of four edge generators (E4, FEE), given in any order."""
     # a sorting network on the four ids: an array to sort would be allocated per candidate
     e0, e1 = min(e0, e1), max(e0, e1)
     e2, e3 = min(e2, e3), max(e2, e3)
     e0, e2 = min(e0, e2), max(e0, e2)
     e1, e3 = min(e1, e3), max(e1, e3)
     e1, e2 = min(e1, e2), max(e1, e2)
-    return _push(out, count, kind, -1, -1, e0, e1, e2, e3, origin, d)
+    _write(out, count, kind, -1, -1, e0, e1, e2, e3, origin, d)
 
 
 @njit(cache=True)
@@ -1680,7 +1688,8 @@ def _vertex_candidates(
     tol, as _meets_segment accepts) and 1e-6 scale, which covers the rounding of the line's direction (the planes
     meet at an angle above delta: the rounded cross product leaves them by at most 1e-7 scale across the
     scene)."""
-    out = _new_output(1024)
+    capacity = 1024
+    out = _new_output(capacity)
     count = 0
     n_cells = 3 * n * n
     n_vertices = vertices.shape[0]
@@ -1752,7 +1761,9 @@ def _vertex_candidates(
                 continue
             if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol, angle_tol):
                 continue
-            out = _push(out, count, CANDIDATE_VV, v, w, -1, -1, -1, -1, p, d)
+            if count == capacity:
+                out, capacity = _grown_output(out, count)
+            _write(out, count, CANDIDATE_VV, v, w, -1, -1, -1, -1, p, d)
             count += 1
 
         # VEE / EVE: register the edges not incident to v, then pair them within each cell
@@ -1860,7 +1871,9 @@ def _vertex_candidates(
                     if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                                 angle_tol):  # fmt: skip
                         continue
-                    out = _push(out, count, CANDIDATE_VEE, v, -1, min(f, g), max(f, g), -1, -1, p, d)
+                    if count == capacity:
+                        out, capacity = _grown_output(out, count)
+                    _write(out, count, CANDIDATE_VEE, v, -1, min(f, g), max(f, g), -1, -1, p, d)
                     count += 1
     return _trim(out, count)
 
@@ -2194,7 +2207,8 @@ def _edge_candidates(
     of seed 003 section 3.2.2). Only edges whose curve crosses R are paired; each pair of curves meets in at
     most two points, the E4 lines.
     """
-    out = _new_output(256)
+    capacity = 256
+    out = _new_output(capacity)
     count = 0
     n_cells = 3 * n * n
     edge_ids = np.flatnonzero(emask)
@@ -2511,7 +2525,9 @@ def _edge_candidates(
                             if lazy and not _line_meets(start, d, src, points, offsets, normals, plane_offsets,
                                                         edge_out, tol, angle_tol):  # fmt: skip
                                 continue
-                            out = _push_edges(out, count, CANDIDATE_E4, e, fx, fy, fz, start, d)
+                            if count == capacity:
+                                out, capacity = _grown_output(out, count)
+                            _write_edges(out, count, CANDIDATE_E4, e, fx, fy, fz, start, d)
                             count += 1
     return _trim(out, count)
 
@@ -2534,7 +2550,8 @@ def _face_candidates(
 
     Pruned (safe, see `_enters_object`): a crossing edge whose convex object the line enters on the side of
     the other generators. Returns candidates (kind CANDIDATE_FEE, the four edges sorted)."""
-    out = _new_output(64)
+    capacity = 64
+    out = _new_output(capacity)
     count = 0
     n_edges = edges.shape[0]
     crossing = np.empty(n_edges, dtype=np.int64)
@@ -2645,7 +2662,9 @@ def _face_candidates(
                 if lazy and not _line_meets(p, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                             angle_tol):  # fmt: skip
                     continue
-                out = _push_edges(out, count, CANDIDATE_FEE, ei, ej, e_in, e_out, p, d)
+                if count == capacity:
+                    out, capacity = _grown_output(out, count)
+                _write_edges(out, count, CANDIDATE_FEE, ei, ej, e_in, e_out, p, d)
                 count += 1
     return _trim(out, count)
 
@@ -2662,7 +2681,8 @@ def _crossing_candidates(
     The double wedges of _vertex_candidates see such a triple as coplanar and propose nothing, but the line is
     a node where touching objects meet: the EV and EEE swaths through X end on it (seed 000 section 2.2,
     touching objects). Validation decides, as for every candidate."""
-    out = _new_output(64)
+    capacity = 64
+    out = _new_output(capacity)
     count = 0
     vertex_ids = np.flatnonzero(vmask)
     d = np.empty(3)
@@ -2689,7 +2709,9 @@ def _crossing_candidates(
             if lazy and not _line_meets(w, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                         angle_tol):  # fmt: skip
                 continue
-            out = _push(out, count, CANDIDATE_VEE, v, -1, min(e, f), max(e, f), -1, -1, w, d)
+            if count == capacity:
+                out, capacity = _grown_output(out, count)
+            _write(out, count, CANDIDATE_VEE, v, -1, min(e, f), max(e, f), -1, -1, w, d)
             count += 1
     return _trim(out, count)
 
@@ -2707,7 +2729,8 @@ def _junction_candidates(
     reaches v): that line ends their pencil, as an FXE line ends the pencils through a crossing of two edges'
     interiors. v lies on `extra`, so the double wedges of _vertex_candidates propose nothing here; validation
     takes the vertex on `extra` for the junction it is (its pencils: validation._pencils_at_junction)."""
-    out = _new_output(16)
+    capacity = 16
+    out = _new_output(capacity)
     count = 0
     vertex_ids = np.flatnonzero(vmask)
     edge_ids = np.flatnonzero(emask)
@@ -2750,7 +2773,9 @@ def _junction_candidates(
                     if lazy and not _line_meets(w, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                                 angle_tol):  # fmt: skip
                         continue
-                    out = _push(out, count, CANDIDATE_VEE, v, -1, min(g, extra), max(g, extra), -1, -1, w, d)
+                    if count == capacity:
+                        out, capacity = _grown_output(out, count)
+                    _write(out, count, CANDIDATE_VEE, v, -1, min(g, extra), max(g, extra), -1, -1, w, d)
                     count += 1
     return _trim(out, count)
 
@@ -2911,7 +2936,8 @@ def _crossing_plane_candidates(
     no vertex and the face planes hold no crossing for _face_candidates, so nothing else proposes X P.
     Validation decides, as for every candidate. Returns candidates (kind CANDIDATE_FXE, edges sorted, one
     -1 last)."""
-    out = _new_output(64)
+    capacity = 64
+    out = _new_output(capacity)
     count = 0
     edge_ids = np.flatnonzero(emask)
     d = np.empty(3)
@@ -2930,7 +2956,9 @@ def _crossing_plane_candidates(
                 continue
             three = np.array([e, f, g], dtype=np.int64)
             three.sort()
-            out = _push(out, count, CANDIDATE_FXE, -1, -1, three[0], three[1], three[2], -1, x, d)
+            if count == capacity:
+                out, capacity = _grown_output(out, count)
+            _write(out, count, CANDIDATE_FXE, -1, -1, three[0], three[1], three[2], -1, x, d)
             count += 1
     return _trim(out, count)
 
@@ -2976,7 +3004,8 @@ def _crossing_transversal_candidates(
     proposes neither. The line is where the EEE swath of the lines through X meeting g reaches h (or the swath
     (g, h, e) reaches the crossing), as a VEE node ends the swaths of a vertex. Pruned by local visibility at
     the four edges (see _enters_object). Returns candidates (kind CANDIDATE_E4, the four edges sorted)."""
-    out = _new_output(64)
+    capacity = 64
+    out = _new_output(capacity)
     count = 0
     edge_ids = np.flatnonzero(emask)
     d = np.empty(3)
@@ -3052,6 +3081,8 @@ def _crossing_transversal_candidates(
                 if lazy and not _line_meets(x, d, src, points, offsets, normals, plane_offsets, edge_out, tol,
                                             angle_tol):  # fmt: skip
                     continue
-                out = _push_edges(out, count, CANDIDATE_E4, e, f, g, h, x, d)
+                if count == capacity:
+                    out, capacity = _grown_output(out, count)
+                _write_edges(out, count, CANDIDATE_E4, e, f, g, h, x, d)
                 count += 1
     return _trim(out, count)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..jit import njit_leaf
 from ..unionfind import find_root
 from .validation import END_PLANAR
 
@@ -246,13 +247,13 @@ def _runs_by_s(order, key, s):
         i = j
 
 
-@njit(cache=True)
+@njit_leaf
 def _before(x, y):
     """Whether x sorts strictly before y, NaN after every number."""
     return x < y or (y != y and x == x)
 
 
-@njit(cache=True)
+@njit_leaf
 def _same_key(kind, codes, i, j):
     """Whether incidences i and j have the same arc key (kind, generators)."""
     return (kind[i] == kind[j] and codes[i, 0] == codes[j, 0] and codes[i, 1] == codes[j, 1]
@@ -273,19 +274,21 @@ def _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node):
         first = order[i]
         # one key, one parameter edge: the lowest edge generator
         edge = 2**31
-        for c in codes[first]:
-            if c >= n_vertices:
-                edge = min(edge, c - n_vertices)
+        for column in range(3):
+            if codes[first, column] >= n_vertices:
+                edge = min(edge, codes[first, column] - n_vertices)
         gap = edge_tol[edge]
         j = i + 1
         while j < m and _same_key(kind, codes, first, order[j]) and s[order[j]] - s[first] <= gap:
             j += 1
         if j - i > len(run):
             run = np.empty(2 * (j - i), dtype=order.dtype)
-        run[: j - i] = order[i:j]
+        for x in range(j - i):
+            run[x] = order[i + x]
         begin = k
         for kept in (-1, 1):
-            for r in run[: j - i]:
+            for x in range(j - i):
+                r = run[x]
                 if direction[r] != kept:
                     continue
                 repeated = False
@@ -358,10 +361,12 @@ def _pair(order, kind, codes, end, direction, s, node, n_arcs):
     return out_kind, out_codes, out_node, out_s, out_ends
 
 
-@njit(cache=True)
+@njit_leaf
 def _arc(row, start, stop, kind, codes, end, out_kind, out_codes, out_ends):
     """Arc `row` keyed by incidence `start`, its ends as found there and at incidence `stop`."""
     out_kind[row] = kind[start]
-    out_codes[row] = codes[start]
-    out_ends[row, 0] = end[start]
-    out_ends[row, 1] = end[stop]
+    for k in range(3):
+        out_codes[row, k] = codes[start, k]
+    for k in range(end.shape[1]):
+        out_ends[row, 0, k] = end[start, k]
+        out_ends[row, 1, k] = end[stop, k]

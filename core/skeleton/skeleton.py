@@ -1727,14 +1727,19 @@ def _vertex_cuts(lo, hi, codes, s, node, n_vertices, vertices, edges, node_start
         mine = vertex_arcs[vertex_offsets[v] : vertex_offsets[v + 1]]
         if mine.shape[0] == 0:
             continue
-        apex = vertices[v]
+        px, py, pz = vertices[v, 0], vertices[v, 1], vertices[v, 2]
         ends = np.unique(node[mine].ravel())
-        # the nodes whose line passes through the vertex (those at the ends of its arcs, unless merged)
+        # the nodes whose line passes through the vertex (those at the ends of its arcs, unless merged); numbers,
+        # not rows: a row view costs two atomic reference counts, a difference or cross product an allocation
         keep = np.zeros(ends.shape[0], dtype=np.bool_)
         for k in range(ends.shape[0]):
-            if ends[k] >= 0:
-                off = np.cross(apex - node_start[ends[k]], node_direction[ends[k]])
-                keep[k] = off @ off <= tol * tol
+            n = ends[k]
+            if n >= 0:
+                ox, oy, oz = _cross3(
+                    (px - node_start[n, 0], py - node_start[n, 1], pz - node_start[n, 2]),
+                    (node_direction[n, 0], node_direction[n, 1], node_direction[n, 2]),
+                )  # fmt: skip
+                keep[k] = ox * ox + oy * oy + oz * oz <= tol * tol
         ends = ends[keep]
         n_ends = ends.shape[0]
         values = np.empty(n_ends)
@@ -1747,16 +1752,23 @@ def _vertex_cuts(lo, hi, codes, s, node, n_vertices, vertices, edges, node_start
         # the directions read by every arc of the vertex, side by side
         directions = node_direction[ends]
         cell_offsets, cell_ends = _direction_grid(directions, grid)
+        apex = np.array((px, py, pz))
+        a = np.empty(3)
+        along = np.empty(3)
         for arc in mine:
             if node[arc, 0] < 0 or node[arc, 1] < 0:
                 continue
             e = codes[arc, 1] - n_vertices
-            a = vertices[edges[e, 0]]
-            along = vertices[edges[e, 1]] - a
-            length = np.sqrt(along @ along)
-            normal = np.cross(along, a - apex)
-            height = np.sqrt(normal @ normal) / length
-            normal /= np.sqrt(normal @ normal)
+            for c in range(3):
+                a[c] = vertices[edges[e, 0], c]
+                along[c] = vertices[edges[e, 1], c] - a[c]
+            ax, ay, az = a[0], a[1], a[2]
+            lx, ly, lz = along[0], along[1], along[2]
+            length = np.sqrt(lx * lx + ly * ly + lz * lz)
+            nx, ny, nz = _cross3((lx, ly, lz), (ax - px, ay - py, az - pz))
+            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+            height = norm / length
+            nx, ny, nz = nx / norm, ny / norm, nz / norm
             n_tested = n_ends
             if indexed:
                 n_tested = _nodes_near_piece(
@@ -1769,23 +1781,26 @@ def _vertex_cuts(lo, hi, codes, s, node, n_vertices, vertices, edges, node_start
                 n = ends[k]
                 if n == node[arc, 0] or n == node[arc, 1]:
                     continue
-                d = directions[k]
+                dx, dy, dz = directions[k, 0], directions[k, 1], directions[k, 2]
                 # a line through the vertex within tol of a point of the edge leans off the swath's plane by at
                 # most 2 tol over the vertex's distance to the edge
-                if abs(normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2]) * height > 2.0 * tol:
+                if abs(nx * dx + ny * dy + nz * dz) * height > 2.0 * tol:
                     continue
-                across = np.cross(along, d)
-                scale = across @ across
+                cx, cy, cz = _cross3((lx, ly, lz), (dx, dy, dz))
+                scale = cx * cx + cy * cy + cz * cz
                 if scale <= cosine * length * length:
                     continue
-                at = -(np.cross(a - apex, d) @ across) / scale
+                wx, wy, wz = _cross3((ax - px, ay - py, az - pz), (dx, dy, dz))
+                at = -(wx * cx + wy * cy + wz * cz) / scale
                 if (at - s[arc, 0]) * length <= tol or (s[arc, 1] - at) * length <= tol:
                     continue
-                miss = np.cross(a + at * along - apex, d)
-                if miss @ miss <= tol * tol:
+                mx, my, mz = _cross3((ax + at * lx - px, ay + at * ly - py, az + at * lz - pz), (dx, dy, dz))
+                if mx * mx + my * my + mz * mz <= tol * tol:
                     values[count] = at
                     ids[count] = n
                     count += 1
+            if count == 0:
+                continue
             if count > 1 and n_tested < n_ends:
                 # in increasing node id, the order testing every node finds them in (argsort breaks ties by it)
                 by_id = np.argsort(ids[:count])
@@ -1801,7 +1816,7 @@ def _vertex_cuts(lo, hi, codes, s, node, n_vertices, vertices, edges, node_start
             np.array(found_node, dtype=np.int32))  # fmt: skip
 
 
-@njit(cache=True, nogil=True)
+@njit_leaf
 def _grid_cell(x, grid):
     """The cell of coordinate x in [-1, 1] among `grid` cells; monotone in x, so a range maps to a range."""
     return min(grid - 1, max(0, int(np.floor((x + 1.0) * 0.5 * grid))))
@@ -1833,7 +1848,7 @@ def _direction_grid(directions, grid):
     return offsets, members
 
 
-@njit(cache=True, nogil=True)
+@njit_leaf
 def _nodes_near_piece(apex, a, along, s0, s1, height, tol, directions, cell_offsets, cell_ends, grid, stamp,
                       last_stamp, out):
     """Positions in the vertex's ends (into out (K,) int64, in no order; returns how many, or K for all of

@@ -2251,6 +2251,8 @@ def _validate_chunk(
         np.empty((bound, 2), dtype=np.int64), np.empty(bound), np.empty(bound, dtype=np.int8),
     )  # fmt: skip
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    # the rows held, as a number: reading them off the tuple of arrays counts a reference to each of them
+    rows = bound
 
     capacity = 256
     c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
@@ -2291,8 +2293,9 @@ def _validate_chunk(
             v = cand_vertices[c, k]
             if v >= 0:
                 need += 2 * (ve_off[v + 1] - ve_off[v])
-        while n_inc + need > incidences.node.shape[0]:
+        while n_inc + need > rows:
             incidences = _grown(incidences, n_inc)
+            rows = incidences.node.shape[0]
         ng = 0
         for k in range(2):
             if cand_vertices[c, k] >= 0:
@@ -2546,8 +2549,9 @@ def _validate_chunk(
                     continue
                 # the relaxed arcs and the junction's pencils (an edge of the vertex by a pivot edge)
                 need = 2 + 3 * (ve_off[gid[j] + 1] - ve_off[gid[j]])
-                while n_inc + need > incidences.node.shape[0]:
+                while n_inc + need > rows:
                     incidences = _grown(incidences, n_inc)
+                    rows = incidences.node.shape[0]
                 n_inc = _vertex_replaced_by_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j, extra,
                     gk, gid, gg, ng,
@@ -2562,6 +2566,7 @@ def _validate_chunk(
                         geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
                         ve_edge, gid[j], gg[j], gk, gid, gg, ng,
                     )  # fmt: skip
+                    rows = incidences.node.shape[0]
             continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
@@ -2584,6 +2589,7 @@ def _validate_chunk(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
+                    rows = incidences.node.shape[0]
             # the call counts a reference to each of the dozens of arrays it is passed: made only where another
             # vertex is met at v's point, which few corners are
             if _other_corner_at(line, corner_vertex, offsets, v, gg[j]):
@@ -2591,6 +2597,7 @@ def _validate_chunk(
                     geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
                     ve_edge, v, gg[j], gk, gid, gg, ng,
                 )  # fmt: skip
+                rows = incidences.node.shape[0]
             # lines sliding over a face (along the floor) are many, edges of it around v's point few: the call
             # counts a reference to each of the dozens of arrays it is passed
             if n_sliding > 0 and _slides_along_edge_through(geometry, line, edge_mask, v, g_tau[gg[j]]):
@@ -2598,6 +2605,7 @@ def _validate_chunk(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
                     g_tau[gg[j]], gg[j],
                 )  # fmt: skip
+                rows = incidences.node.shape[0]
 
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
@@ -2624,8 +2632,9 @@ def _validate_chunk(
                     need = 4
                     if ng == 2:
                         need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
-                    while n_inc + need > incidences.node.shape[0]:
+                    while n_inc + need > rows:
                         incidences = _grown(incidences, n_inc)
+                        rows = incidences.node.shape[0]
                     for j in range(ng):
                         if gk[j] != GEN_VERTEX:
                             continue
@@ -2677,8 +2686,9 @@ def _validate_chunk(
                     if not edge_mask[extras[x]]:
                         continue
                     need = (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
-                    while n_inc + need > incidences.node.shape[0]:
+                    while n_inc + need > rows:
                         incidences = _grown(incidences, n_inc)
+                        rows = incidences.node.shape[0]
                     n_inc = _swaths_leaving_both_vertices(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
                         gg, extras[x], g,
@@ -2694,6 +2704,7 @@ def _validate_chunk(
                             geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
                             gid, gg, corner, g,
                         )  # fmt: skip
+                        rows = incidences.node.shape[0]
 
         # an FXE node ends the EEE swath of the lines through its crossing point meeting its third edge: all
         # three generators are kept and the contact on the third edge slides either way
@@ -2720,6 +2731,7 @@ def _validate_chunk(
             incidences, n_inc = _pencils_over_plane_edges(
                 geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone
             )
+            rows = incidences.node.shape[0]
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
