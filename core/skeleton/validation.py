@@ -1537,15 +1537,15 @@ def _other_corner_at(line, corner_vertex, offsets, v, g):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
                    tau_w, gk, gid, ng):  # fmt: skip
     """The EV arcs of vertex generator v (at tau_v, group group_v of the node's line) and each masked edge of
     another object crossing the line where it runs along v's edge e_v (up to its other end, at tau_w): the lines
     through v meeting that edge lie in the plane of both edges and turn at this line from one side of e_v to
     the other (off the face of e_v, or in under the object stacked across it), so these arcs start or end
-    here. gk, gid: the node's ng generators (edges among them have their own arcs). Returns (incidences, grown
-    when full, and the next free row)."""
+    here. gk, gid: the node's ng generators (edges among them have their own arcs). Returns the next free row,
+    or -1 when the rows run out (see _validate_from)."""
     g_ = geometry
     edges = g_.edges
     offsets = g_.offsets
@@ -1570,14 +1570,14 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
             if repeated:
                 continue
             if n_inc + 2 > incidences.node.shape[0]:
-                incidences = _grown(incidences, n_inc)
+                return -1
             r_kind, r_id, r_group, _ = retained
             r_kind[0], r_id[0], r_group[0] = GEN_VERTEX, v, group_v
             r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
             norm_dir = _edge_direction(g_.vertices, edges, e, -1)
             for sigma in (1.0, -1.0):
                 n_inc = _relaxed_arc(geometry, line, retained, 2, 1, norm_dir, sigma, scratch, incidences, n_inc, node)
-    return incidences, n_inc
+    return n_inc
 
 
 @njit_leaf
@@ -1679,7 +1679,7 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
                                   ve_edge, gid, gg, x, g):  # fmt: skip
     """The EEE arcs of a line through two vertex generators gid[0], gid[1] (groups gg) grazing a third vertex x
     between them (group g): through an edge at each of the three corners (see _corner_edges), the contacts
-    leaving all three at once. Returns (incidences, grown when full, and the next free row)."""
+    leaving all three at once. Returns the next free row, or -1 when the rows run out (see _validate_from)."""
     corners = (gid[0], gid[1], x)
     groups = (gg[0], gg[1], g)
     size = 0
@@ -1691,8 +1691,8 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
     for k in range(3):
         counts[k] = _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, corners[k], groups[k], found[k],
                                   pins[k])  # fmt: skip
-    while n_inc + 2 * counts[0] * counts[1] * counts[2] > incidences.node.shape[0]:
-        incidences = _grown(incidences, n_inc)
+    if n_inc + 2 * counts[0] * counts[1] * counts[2] > incidences.node.shape[0]:
+        return -1
     r_kind, r_id, r_group, r_pin = retained
     for a in range(counts[0]):
         for b in range(counts[1]):
@@ -1710,7 +1710,7 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
                     )
     for k in range(3):
         r_pin[k] = -1
-    return incidences, n_inc
+    return n_inc
 
 
 @njit_leaf
@@ -1753,7 +1753,7 @@ def _angle_in_solid(geometry, line, scratch, group, into_a, into_b):
                             scratch.angles)  # fmt: skip
 
 
-@njit(cache=True)
+@njit_leaf
 def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask,
                               ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the pencils in the plane of vertex generator v's edge e_v and an edge e_w of another vertex w at
@@ -1761,8 +1761,8 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
     generator edge piercing that plane, when the node's line lies in it: their lines cross e_v and e_w near the
     corner, both contacts moving into their edges from it, and pass through the corner on this line, where
     both contacts reach their edge's end at once (no node through one of the vertices and the other edge names
-    them). gk, gid, gg: the node's ng generators and their groups. Returns (incidences, grown when full, and
-    the next free row)."""
+    them). gk, gid, gg: the node's ng generators and their groups. Returns the next free row, or -1 when the
+    rows run out (see _validate_from)."""
     g_ = geometry
     vertices, edges, offsets = g_.vertices, g_.edges, g_.offsets
     u = line.u
@@ -1805,7 +1805,7 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                             abs(_dot(_edge_direction(vertices, edges, gid[k], -1), normal)) <= g_.angle_tol * length:
                         continue
                     if n_inc + 1 > incidences.node.shape[0]:
-                        incidences = _grown(incidences, n_inc)
+                        return -1
                     r_kind, r_id, r_group, r_pin = retained
                     r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
@@ -1813,7 +1813,7 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                     n_inc = _relaxed_arc(geometry, line, retained, 3, 1, into_v, 1.0, scratch, incidences, n_inc, node)
                     r_pin[1] = -1
                     r_pin[2] = -1
-    return incidences, n_inc
+    return n_inc
 
 
 @njit_leaf
@@ -1846,7 +1846,7 @@ def _slides_along_edge_through(geometry, line, edge_mask, v, tau_v):
     return False
 
 
-@njit(cache=True)
+@njit_leaf
 def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
                                v, tau_v, group_v):  # fmt: skip
     """The pencil arcs ending where the line runs along another object's edge e through vertex generator v (at
@@ -1855,8 +1855,8 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
     the plane of e and an edge e_v of v about the crossing: its lines meet e_v, and their contact reaches v on
     this line, along e. A corner off e ends such a pencil at the VEE node of the corner, e and f; this line
     meets e along its length, no VEE candidate, so its nodes (two vertices on it) end the pencil: relaxing v,
-    the contact moves into e_v while the lines keep the crossing. Returns (incidences, grown when full, and the
-    next free row)."""
+    the contact moves into e_v while the lines keep the crossing. Returns the next free row, or -1 when the
+    rows run out (see _validate_from)."""
     g_ = geometry
     vertices, edges, offsets, corner_edge = g_.vertices, g_.edges, g_.offsets, g_.corner_edge
     tol = g_.tol
@@ -1901,7 +1901,7 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                         if length <= g_.angle_tol or abs(_dot(across, normal)) <= g_.angle_tol * length:
                             continue
                         if n_inc + 1 > incidences.node.shape[0]:
-                            incidences = _grown(incidences, n_inc)
+                            return -1
                         r_kind, r_id, r_group, r_pin = retained
                         r_kind[0], r_id[0], r_group[0] = GEN_EDGE, f, g
                         r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
@@ -1910,10 +1910,10 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                             geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node
                         )
                         r_pin[1] = -1
-    return incidences, n_inc
+    return n_inc
 
 
-@njit(cache=True)
+@njit_leaf
 def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone):
     """The pencil arcs of an FXE node (generators gid in line order, groups gg, `lone` the third edge's index)
     named by another edge of the crossing's plane that its line crosses between the third edge and the crossing
@@ -1921,7 +1921,7 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
     crossing edge slides off it while the lines keep meeting that edge. A node through a vertex of the
     crossing edge, off the crossing, meets the same pencil with that edge among its generators, and names the
     arc so; the lines that go on to cross the other crossing edge are rejected at both (they graze it). Returns
-    (incidences, grown when full, and the next free row)."""
+    the next free row, or -1 when the rows run out (see _validate_from)."""
     g_ = geometry
     vertices, edges = g_.vertices, g_.edges
     first_pair = 1 if lone == 0 else 0
@@ -1942,7 +1942,7 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
             if _met_before(line, g_.corner_edge, g_.offsets, g, i, CONTACT_EDGE, e):
                 continue
             if n_inc + 4 > incidences.node.shape[0]:
-                incidences = _grown(incidences, n_inc)
+                return -1
             r_kind, r_id, r_group, _ = retained
             for sliding in (first_pair, second_pair):
                 r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[lone], gg[lone]
@@ -1953,7 +1953,7 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
                     n_inc = _relaxed_arc(
                         geometry, line, retained, 3, 2, norm_dir, sigma, scratch, incidences, n_inc, node
                     )
-    return incidences, n_inc
+    return n_inc
 
 
 @njit_leaf
@@ -1976,10 +1976,10 @@ def _sliding_faces_meet_in(geometry, line, point, direction, normal):
 
 
 @njit(cache=True)
-def _grown(incidences, n_inc):
-    """_Incidences with room for twice as many rows, the first n_inc copied: rows an arc call site cannot
-    bound in advance (edges crossing a vertex's edge along a node's line)."""
-    size = 2 * incidences.node.shape[0] + 16
+def _grown(incidences, n_inc, least):
+    """_Incidences with room for twice as many rows and at least `least`, the first n_inc copied: rows an arc
+    call site cannot bound in advance (edges crossing a vertex's edge along a node's line)."""
+    size = max(2 * incidences.node.shape[0] + 16, least)
     bigger = _Incidences(
         np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int8), np.empty((size, 3), dtype=np.int64),
         np.empty((size, 2), dtype=np.int64), np.empty(size), np.empty(size, dtype=np.int8),
@@ -2227,17 +2227,17 @@ def _candidate_rows(cand_vertices, cand_edges, ve_off, c):
 @njit(cache=True, nogil=True)
 def _validate_chunk(
     geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
-    cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi,
+    cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, first_rows=-1,
 ):  # fmt: skip
-    (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
-     corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
-     angle_tol) = geometry  # fmt: skip
-    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
+    """The nodes and incidences of candidates lo..hi-1 (see _validate_slice), in candidate order. The incidence
+    rows start at a bound of what most candidates write (first_rows, when >= 0: that many instead) and grow
+    when a candidate needs more: it is then validated again (_validate_from)."""
     n_cand = cand_kind.shape[0]
-    n_vertices = vertices.shape[0]
     bound = 0
     for c in range(n_cand):
         bound += _candidate_rows(cand_vertices, cand_edges, ve_off, c)
+    if first_rows >= 0:
+        bound = first_rows
     node_cand = np.empty(n_cand, dtype=np.int64)
     node_kind = np.empty(n_cand, dtype=np.int8)
     node_gkind = np.zeros((n_cand, 4), dtype=np.int8)
@@ -2251,10 +2251,49 @@ def _validate_chunk(
         np.empty((bound, 2), dtype=np.int64), np.empty(bound), np.empty(bound, dtype=np.int8),
     )  # fmt: skip
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
-    # the rows held, as a number: reading them off the tuple of arrays counts a reference to each of them
-    rows = bound
+    nodes = (node_cand, node_kind, node_gkind, node_gid, node_start, node_dir, node_reach, node_end)
+    c = 0
+    n_nodes = 0
+    n_inc = 0
+    while c < n_cand:
+        c, n_nodes, n_inc, wanted = _validate_from(
+            c, n_nodes, n_inc, geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
+            cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, nodes, incidences, counters,
+        )  # fmt: skip
+        if c < n_cand:
+            incidences = _grown(incidences, n_inc, wanted)
+    return (
+        node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
+        node_dir[:n_nodes], node_reach[:n_nodes], node_end[:n_nodes],
+        incidences.node[:n_inc], incidences.kind[:n_inc], incidences.codes[:n_inc], incidences.end[:n_inc],
+        incidences.s[:n_inc], incidences.direction[:n_inc], counters,
+    )  # fmt: skip
 
-    capacity = 256
+
+@njit(cache=True)
+def _validate_from(
+    c_from, n_nodes, n_inc, geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
+    cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, nodes, incidences, counters,
+):  # fmt: skip
+    """Validate candidates c_from... (see _validate_chunk) into the node rows from n_nodes and the incidence rows
+    from n_inc, until every candidate is done or a candidate needs more incidence rows than there are. Returns
+    (the next candidate, node rows, incidence rows, rows wanted): a candidate that ran out is the next one, its
+    rows count for nothing, and the rows wanted are at least as many as it asked for; the number of candidates
+    when all are done.
+
+    The incidences are never replaced here: an array variable replaced in the loop (a grown buffer) is one the
+    loop carries from candidate to candidate, at a reference count per array per candidate."""
+    (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+     corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
+     angle_tol) = geometry  # fmt: skip
+    node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
+    node_cand, node_kind, node_gkind, node_gid, node_start, node_dir, node_reach, node_end = nodes
+    n_cand = cand_vertices.shape[0]
+    n_vertices = vertices.shape[0]
+    rows = incidences.node.shape[0]
+    # a line meets each polygon once, and a flat vertex of each generator adds a group: buffers that never fill.
+    # Grown in the loop they were new arrays every candidate carried, a reference count on each of them per candidate
+    capacity = offsets.shape[0] - 1 + 4
     c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
     extras = np.empty(capacity, dtype=np.int64)
     stack = np.empty(STACK_SIZE, dtype=np.int64)
@@ -2283,9 +2322,9 @@ def _validate_chunk(
     r_pin = np.full(3, -1, dtype=np.int64)
     retained = (r_kind, r_id, r_group, r_pin)
 
-    n_nodes = 0
-    n_inc = 0
-    for c in range(n_cand):
+    for c in range(c_from, n_cand):
+        nodes_before = n_nodes
+        rows_before = n_inc
         # the pencils of a vertex on another object's edge (an edge of it x 2 pivots) are rare: the rows left
         # for them are checked here instead of bounded above
         need = _candidate_rows(cand_vertices, cand_edges, ve_off, c)
@@ -2293,9 +2332,8 @@ def _validate_chunk(
             v = cand_vertices[c, k]
             if v >= 0:
                 need += 2 * (ve_off[v + 1] - ve_off[v])
-        while n_inc + need > rows:
-            incidences = _grown(incidences, n_inc)
-            rows = incidences.node.shape[0]
+        if n_inc + need > rows:
+            return c, n_nodes, n_inc, n_inc + need
         ng = 0
         for k in range(2):
             if cand_vertices[c, k] >= 0:
@@ -2343,22 +2381,11 @@ def _validate_chunk(
             counters[REJECT_MISSING] += 1
             continue
         length = t1 - t0
-        # contacts beyond the buffers are counted, not written: grow them and cast again
-        while True:
-            found = _gather_contacts(
-                points, offsets, normals, plane_offsets,
-                node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
-                segment_start, segment_end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
-            )  # fmt: skip
-            if found <= capacity:
-                break
-            capacity = 2 * found
-            c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
-            extras = np.empty(capacity, dtype=np.int64)
-            scratch = _new_scratch(capacity + max_faces)
-            arc_start = scratch.arc_start
-            arc_len = scratch.arc_len
-            bounds = scratch.bounds
+        found = _gather_contacts(
+            points, offsets, normals, plane_offsets,
+            node_min, node_max, node_child, node_first, node_count, order, box_min, box_max,
+            segment_start, segment_end, -1, -1, tol, False, False, c_poly, c_t, c_kind, c_local, stack,
+        )  # fmt: skip
         _sort_contacts(c_poly, c_t, c_kind, c_local, found, tol / length)
         # lines lying in a face plane slide over it: an interval, not a point; kept apart from the point groups
         n_sliding = 0
@@ -2549,9 +2576,8 @@ def _validate_chunk(
                     continue
                 # the relaxed arcs and the junction's pencils (an edge of the vertex by a pivot edge)
                 need = 2 + 3 * (ve_off[gid[j] + 1] - ve_off[gid[j]])
-                while n_inc + need > rows:
-                    incidences = _grown(incidences, n_inc)
-                    rows = incidences.node.shape[0]
+                if n_inc + need > rows:
+                    return c, nodes_before, rows_before, n_inc + need
                 n_inc = _vertex_replaced_by_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j, extra,
                     gk, gid, gg, ng,
@@ -2562,11 +2588,12 @@ def _validate_chunk(
         if junction:
             for j in range(ng):
                 if gk[j] == GEN_VERTEX and _other_corner_at(line, corner_vertex, offsets, gid[j], gg[j]):
-                    incidences, n_inc = _pencils_at_shared_corner(
+                    n_inc = _pencils_at_shared_corner(
                         geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
                         ve_edge, gid[j], gg[j], gk, gid, gg, ng,
                     )  # fmt: skip
-                    rows = incidences.node.shape[0]
+                    if n_inc < 0:
+                        return c, nodes_before, rows_before, 2 * rows
             continue
 
         # a line through a vertex generator running along one of its edges (a box's top edge) that another
@@ -2585,27 +2612,29 @@ def _validate_chunk(
                 tau_w = _dot(offset, u)
                 across = _minus(offset, _scaled(u, tau_w))
                 if _dot(across, across) <= tol * tol:
-                    incidences, n_inc = _arcs_off_edge(
+                    n_inc = _arcs_off_edge(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
                         g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
-                    rows = incidences.node.shape[0]
-            # the call counts a reference to each of the dozens of arrays it is passed: made only where another
-            # vertex is met at v's point, which few corners are
+                    if n_inc < 0:
+                        return c, nodes_before, rows_before, 2 * rows
+            # a quick test first: another vertex is met at v's point at few corners
             if _other_corner_at(line, corner_vertex, offsets, v, gg[j]):
-                incidences, n_inc = _pencils_at_shared_corner(
+                n_inc = _pencils_at_shared_corner(
                     geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
                     ve_edge, v, gg[j], gk, gid, gg, ng,
                 )  # fmt: skip
-                rows = incidences.node.shape[0]
-            # lines sliding over a face (along the floor) are many, edges of it around v's point few: the call
-            # counts a reference to each of the dozens of arrays it is passed
+                if n_inc < 0:
+                    return c, nodes_before, rows_before, 2 * rows
+            # lines sliding over a face (along the floor) are many, edges of it around v's point few: a quick test
+            # first
             if n_sliding > 0 and _slides_along_edge_through(geometry, line, edge_mask, v, g_tau[gg[j]]):
-                incidences, n_inc = _pencils_to_vertex_on_edge(
+                n_inc = _pencils_to_vertex_on_edge(
                     geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
                     g_tau[gg[j]], gg[j],
                 )  # fmt: skip
-                rows = incidences.node.shape[0]
+                if n_inc < 0:
+                    return c, nodes_before, rows_before, 2 * rows
 
         # a line through a vertex generator that also meets an edge beyond its outer generators (a floor edge
         # reached along the floor, a box edge grazed on the way) is where the lines through the other
@@ -2632,9 +2661,8 @@ def _validate_chunk(
                     need = 4
                     if ng == 2:
                         need += (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
-                    while n_inc + need > rows:
-                        incidences = _grown(incidences, n_inc)
-                        rows = incidences.node.shape[0]
+                    if n_inc + need > rows:
+                        return c, nodes_before, rows_before, n_inc + need
                     for j in range(ng):
                         if gk[j] != GEN_VERTEX:
                             continue
@@ -2686,9 +2714,8 @@ def _validate_chunk(
                     if not edge_mask[extras[x]]:
                         continue
                     need = (ve_off[gid[0] + 1] - ve_off[gid[0]]) * (ve_off[gid[1] + 1] - ve_off[gid[1]])
-                    while n_inc + need > rows:
-                        incidences = _grown(incidences, n_inc)
-                        rows = incidences.node.shape[0]
+                    if n_inc + need > rows:
+                        return c, nodes_before, rows_before, n_inc + need
                     n_inc = _swaths_leaving_both_vertices(
                         geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
                         gg, extras[x], g,
@@ -2700,11 +2727,12 @@ def _validate_chunk(
                         continue
                     corner = corner_vertex[offsets[c_poly[i]] + c_local[i]]
                     if not _met_before(line, corner_vertex, offsets, g, i, CONTACT_VERTEX, corner):
-                        incidences, n_inc = _swaths_leaving_three_corners(
+                        n_inc = _swaths_leaving_three_corners(
                             geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
                             gid, gg, corner, g,
                         )  # fmt: skip
-                        rows = incidences.node.shape[0]
+                        if n_inc < 0:
+                            return c, nodes_before, rows_before, 2 * rows
 
         # an FXE node ends the EEE swath of the lines through its crossing point meeting its third edge: all
         # three generators are kept and the contact on the third edge slides either way
@@ -2728,10 +2756,11 @@ def _validate_chunk(
                 n_inc = _relaxed_arc(
                     geometry, line, retained, 3, pair_low, norm_dir, sigma, scratch, incidences, n_inc, node
                 )
-            incidences, n_inc = _pencils_over_plane_edges(
+            n_inc = _pencils_over_plane_edges(
                 geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone
             )
-            rows = incidences.node.shape[0]
+            if n_inc < 0:
+                return c, nodes_before, rows_before, 2 * rows
 
         # relax one generator at a time: an edge in both directions, a vertex along each of its edges
         for j in range(ng):
@@ -2788,12 +2817,7 @@ def _validate_chunk(
                     tol,
                 )  # fmt: skip
                 break
-    return (
-        node_cand[:n_nodes], node_kind[:n_nodes], node_gkind[:n_nodes], node_gid[:n_nodes], node_start[:n_nodes],
-        node_dir[:n_nodes], node_reach[:n_nodes], node_end[:n_nodes],
-        incidences.node[:n_inc], incidences.kind[:n_inc], incidences.codes[:n_inc], incidences.end[:n_inc],
-        incidences.s[:n_inc], incidences.direction[:n_inc], counters,
-    )  # fmt: skip
+    return n_cand, n_nodes, n_inc, 0
 
 
 def validate_candidates(scene, topology, bvh, candidates, edge_mask, workers: int = WORKERS, element_solid=None,

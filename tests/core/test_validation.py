@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from bench.scenes import SCENES as BENCH_SCENES
+from bench.scenes import closed_furnished_room
 from core.bvh import STACK_SIZE, build_bvh
 from core.scene import EDGE_FLAT
+from core.skeleton import validation
 from core.skeleton.candidates import CANDIDATE_E4, NodeCandidates
 from core.skeleton.enumeration import iter_candidates
 from core.skeleton.topology import scene_topology
@@ -108,6 +110,27 @@ def test_early_rejection_only_rejects_lines_blocked_between_their_generators(nam
         )
     assert rejected > len(sample) // 10, f"{name}: only {rejected} of {len(sample)} rejected early"
 
+
+
+@pytest.mark.parametrize("name", ["office-84", "furnished room"])
+@pytest.mark.parametrize("first_rows", [0, 5, 300])
+def test_validation_does_not_depend_on_the_incidence_rows_it_starts_with(name, first_rows, monkeypatch):
+    """A candidate that runs out of incidence rows is validated again with more (_validate_from). Starting with
+    none or a few rows instead of the bound grows them again and again, wherever rows are written: the nodes,
+    incidences and counters must be exactly those of a start with the bound."""
+    scene = (BENCH_SCENES["office-84"]() if name == "office-84" else closed_furnished_room(7, n_boxes=14)).build()
+    vertex_mask, edge_mask = generator_masks(scene)
+    candidates = NodeCandidates.concatenate([c for c, _ in iter_candidates(scene, vertex_mask, edge_mask)])
+    topology, bvh = scene_topology(scene), build_bvh(scene)
+    expected = validate_candidates(scene, topology, bvh, candidates, edge_mask, workers=1)
+    kernel = validation._validate_chunk
+    monkeypatch.setattr(validation, "_validate_chunk", lambda *arguments: kernel(*arguments, first_rows))
+    nodes, incidences, counters = validate_candidates(scene, topology, bvh, candidates, edge_mask, workers=1)
+    assert len(expected[1]) > 1000, f"{name}: too few incidences to grow the rows often"
+    np.testing.assert_array_equal(counters, expected[2])
+    for got, wanted in ((nodes, expected[0]), (incidences, expected[1])):
+        for field, column in vars(wanted).items():
+            np.testing.assert_array_equal(getattr(got, field), column, err_msg=f"{name}: {field}")
 
 
 def _edge_between(scene, a, b) -> int:
