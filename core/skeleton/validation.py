@@ -2229,9 +2229,9 @@ def _validate_chunk(
     geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
     cand_kind, cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, first_rows=-1,
 ):  # fmt: skip
-    """The nodes and incidences of candidates lo..hi-1 (see _validate_slice), in candidate order. The incidence
-    rows start at a bound of what most candidates write (first_rows, when >= 0: that many instead) and grow
-    when a candidate needs more: it is then validated again (_validate_from)."""
+    """The nodes and incidences of the candidates, their lines clipped to the box lo..hi (see _validate_slice),
+    in candidate order. The incidence rows start at a bound of what most candidates write (first_rows, when >= 0:
+    that many instead) and grow when a candidate needs more: it is then validated again (_validate_from)."""
     n_cand = cand_kind.shape[0]
     bound = 0
     for c in range(n_cand):
