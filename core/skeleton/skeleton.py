@@ -152,20 +152,21 @@ class Skeleton:
         element_solid = element_solids(self.scene, self.topology)
         face_region = flat_regions(self.scene)
         edge_tol = _edge_tolerance(self.scene)
-        for candidates, fraction in iter_candidates(
-            self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
-            cancel=cancel,
-        ):  # fmt: skip
-            if cancel is not None and cancel():
-                raise CancelledError("skeleton construction cancelled")
+
+        def validated(candidates: NodeCandidates):
             if len(built):
                 candidates = _not_through(self.scene, candidates, built)
             nodes, incidences, counters = validate_candidates(
                 self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid,
                 face_region=face_region,
             )
-            rejected += counters
             nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)
+            return nodes, incidences, counters
+
+        def commit(validation) -> None:
+            nonlocal n_nodes
+            nodes, incidences, counters = validation.result()
+            rejected[:] += counters
             node_parts.append(nodes)
             incidence_parts.append(
                 IncidenceChunk(
@@ -174,9 +175,27 @@ class Skeleton:
                 )
             )
             n_nodes += len(nodes)
-            del candidates, nodes, incidences
             _return_free_memory()
-            yield fraction
+
+        # a chunk is validated on a thread of its own while the next one is enumerated: neither stage waits
+        # for the other's slowest slice to end, and the cores stay busy between chunks
+        with ThreadPoolExecutor(1) as pool:
+            in_flight = None
+            for candidates, fraction in iter_candidates(
+                self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
+                cancel=cancel,
+            ):  # fmt: skip
+                if cancel is not None and cancel():
+                    raise CancelledError("skeleton construction cancelled")
+                # the pool's one thread takes this chunk when the previous one is validated
+                previous, in_flight = in_flight, (pool.submit(validated, candidates), fraction)
+                del candidates
+                if previous is not None:
+                    commit(previous[0])
+                    yield previous[1]
+            if in_flight is not None:
+                commit(in_flight[0])
+                yield in_flight[1]
         if cancel is not None and cancel():
             raise CancelledError("skeleton construction cancelled")
         self._node_parts.extend(node_parts)

@@ -11,14 +11,15 @@ Scenes the construction does not handle yet are marked xfail(strict=True) with w
 they turn into failures the day they pass.
 """
 
-from functools import cache
+from functools import cache, partial
 
 import numpy as np
 import pytest
 
 from bench.scenes import SCENES as BENCH_SCENES
+from core.errors import CancelledError
 from core.scene import Scene
-from core.skeleton import build_skeleton
+from core.skeleton import build_skeleton, enumeration
 from core.skeleton import skeleton as skeleton_module
 from core.skeleton.validation import ARC_EV, END_FREE, END_TERMINAL, GEN_NONE, GEN_VERTEX
 from core.visibility import exact_form_factors
@@ -1315,6 +1316,35 @@ def test_lazy_builds_then_complete_give_the_full_skeleton(name):
     for lazy_values, full_values in zip(_sorted_arcs(lazy), _sorted_arcs(full), strict=True):
         np.testing.assert_array_equal(lazy_values, full_values)
     assert 0 < partial_bytes and lazy.nbytes == full.nbytes
+
+
+def test_small_chunks_build_the_same_skeleton_and_a_cancelled_build_changes_nothing(monkeypatch):
+    """Chunks of 40 candidates (each validated on a thread while the next is enumerated, committed in order)
+    give the arcs and nodes of the default chunking; a build cancelled after two chunks raises CancelledError
+    and leaves the skeleton as it was (its sources, nodes and arcs), which then completes to the full one."""
+    name = "box on box"
+    full = _skeleton(name)
+    monkeypatch.setattr(enumeration, "iter_candidates", partial(enumeration.iter_candidates, chunk=40))
+    fractions = []
+    chunked = build_skeleton(_scene(name), progress=lambda stage, fraction: fractions.append(fraction))
+    assert len(fractions) > 10 and np.all(np.diff(fractions) >= 0) and fractions[-1] == 1.0
+    np.testing.assert_array_equal(chunked.nodes.start, full.nodes.start)
+    for chunked_values, full_values in zip(_sorted_arcs(chunked), _sorted_arcs(full), strict=True):
+        np.testing.assert_array_equal(chunked_values, full_values)
+
+    lazy = build_skeleton(_scene(name), sources=[0])
+    sources, arcs, n_nodes = lazy.sources.copy(), _sorted_arcs(lazy), len(lazy.nodes)
+    steps = []
+    with pytest.raises(CancelledError):
+        lazy.build(None, progress=lambda stage, fraction: steps.append(fraction), cancel=lambda: len(steps) >= 2)
+    assert len(steps) == 2
+    np.testing.assert_array_equal(lazy.sources, sources)
+    assert len(lazy.nodes) == n_nodes
+    for after, before in zip(_sorted_arcs(lazy), arcs, strict=True):
+        np.testing.assert_array_equal(after, before)
+    lazy.complete()
+    for lazy_values, full_values in zip(_sorted_arcs(lazy), _sorted_arcs(full), strict=True):
+        np.testing.assert_array_equal(lazy_values, full_values)
 
 
 @pytest.mark.parametrize("seed", FURNISHED_SAMPLE)
