@@ -14,6 +14,7 @@ arcs by vertex -> the arcs through that vertex (its views of every polygon).
 from __future__ import annotations
 
 import ctypes
+import os
 import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
@@ -55,6 +56,10 @@ try:
     _malloc_trim = ctypes.CDLL("libc.so.6").malloc_trim
 except (OSError, AttributeError):
     _malloc_trim = None
+_PAGE_BYTES = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+#: growth of the resident memory (bytes) over its lowest since the last trim that makes _return_free_memory trim
+_TRIM_GROWTH = 32 << 20
+_resident_low = 0
 
 
 _PROBE_LENGTHS = 1e3
@@ -76,11 +81,30 @@ class Probes:
 
 
 def _return_free_memory() -> None:
-    """Hand the free pages of the C heap back to the system (glibc only). A build allocates and frees many
-    arrays below malloc's mmap threshold (the kernels' worst-case buffers, the pieces joined at the end):
-    malloc keeps their pages, and the resident memory of the process (Blender's) stays at its peak."""
-    if _malloc_trim is not None:
-        _malloc_trim(0)
+    """Hand the free pages of the C heap back to the system (glibc only) once the resident memory of the process
+    has grown by _TRIM_GROWTH over its lowest since they last were. A build allocates and frees many arrays below
+    malloc's mmap threshold (the kernels' worst-case buffers, the pieces joined at the end): malloc keeps their
+    pages, and the resident memory of the process (Blender's) would stay at its peak. Pages handed back are
+    faulted in again, zeroed, by the next allocations: trimmed at every call, office-84's repeated builds took 6 %
+    longer (2026-11-28)."""
+    global _resident_low
+    if _malloc_trim is None:
+        return
+    resident = _resident_bytes()
+    if resident is not None and resident < _resident_low + _TRIM_GROWTH:
+        _resident_low = min(_resident_low, resident)
+        return
+    _malloc_trim(0)
+    _resident_low = _resident_bytes() or 0
+
+
+def _resident_bytes() -> int | None:
+    """The resident memory of this process in bytes (Linux), None where it cannot be read."""
+    try:
+        with open("/proc/self/statm", "rb") as statm:
+            return int(statm.read().split()[1]) * _PAGE_BYTES
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class Skeleton:
