@@ -1318,6 +1318,23 @@ def test_lazy_builds_then_complete_give_the_full_skeleton(name):
     assert 0 < partial_bytes and lazy.nbytes == full.nbytes
 
 
+@pytest.mark.skipif(skeleton_module._resident_bytes() is None, reason="no /proc/self/statm to read")
+def test_free_pages_are_handed_back_only_after_the_process_grew(monkeypatch):
+    """malloc_trim runs when the resident memory has grown by _TRIM_GROWTH over its lowest since the last trim:
+    not again while it stays, again once 3 x _TRIM_GROWTH more pages are touched."""
+    trims = []
+    monkeypatch.setattr(skeleton_module, "_malloc_trim", lambda pad: trims.append(pad))
+    monkeypatch.setattr(skeleton_module, "_resident_low", 0)
+    skeleton_module._return_free_memory()
+    assert len(trims) == 1
+    for _ in range(5):
+        skeleton_module._return_free_memory()
+    assert len(trims) == 1
+    grown = np.ones(3 * skeleton_module._TRIM_GROWTH // 8)
+    skeleton_module._return_free_memory()
+    assert len(trims) == 2 and grown[-1] == 1.0
+
+
 def test_small_chunks_build_the_same_skeleton_and_a_cancelled_build_changes_nothing(monkeypatch):
     """Chunks of 40 candidates (each validated on a thread while the next is enumerated, committed in order)
     give the arcs and nodes of the default chunking; a build cancelled after two chunks raises CancelledError
