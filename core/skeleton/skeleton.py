@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 import os
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
@@ -839,19 +840,26 @@ def _pieces_by_key_range(parts: list, bounds: np.ndarray, n_codes: int, release:
                 taken.append(IncidenceChunk(*(getattr(part, name)[inside] for name in names)))
             yield _concatenated(IncidenceChunk, taken)
         return
-    ranges: list[list[IncidenceChunk]] = [[] for _ in range(n_ranges)]
-    parts.reverse()
-    while parts:
-        part = parts.pop()
+
+    def split(part) -> list:
         which = np.searchsorted(bounds, _key_prefix(part, n_codes), side="right") - 1
         order = np.argsort(which, kind="stable")
         cuts = np.searchsorted(which[order], np.arange(n_ranges + 1))
-        for k in range(n_ranges):
-            rows = order[cuts[k] : cuts[k + 1]]
-            if len(rows):
-                ranges[k].append(IncidenceChunk(*(getattr(part, name)[rows] for name in names)))
-        del part, which, order
-        _return_free_memory()
+        return [IncidenceChunk(*(getattr(part, name)[order[lo:hi]] for name in names)) if hi > lo else None
+                for lo, hi in zip(cuts[:-1], cuts[1:], strict=True)]  # fmt: skip
+
+    ranges: list[list[IncidenceChunk]] = [[] for _ in range(n_ranges)]
+    parts.reverse()
+    # a part per thread is split at once (numpy's sorts and takes release the GIL), kept in the parts' order
+    with ThreadPoolExecutor(WORKERS) as pool:
+        splitting: deque = deque()
+        while parts or splitting:
+            while parts and len(splitting) < WORKERS:
+                splitting.append(pool.submit(split, parts.pop()))
+            for k, piece in enumerate(splitting.popleft().result()):
+                if piece is not None:
+                    ranges[k].append(piece)
+            _return_free_memory()
     for pieces in ranges:
         yield _concatenated(IncidenceChunk, pieces)
 
