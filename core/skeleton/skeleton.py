@@ -20,6 +20,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
+from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -135,7 +136,6 @@ class Skeleton:
             scene.vertices, scene.edges, scene.edge_face_offsets, scene.edge_faces, scene.object_ids,
             self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
         )  # fmt: skip
-        self._collinear_offsets, self._collinear_edges = _collinear_edges(scene)
         self.sources: np.ndarray | None = np.empty(0, dtype=np.int64)
         self._node_parts: list[NodeChunk] = []
         self._incidence_parts: list[IncidenceChunk] = []
@@ -650,13 +650,19 @@ class Skeleton:
                     done.result()
         return Probes(offsets, piece_s, piece_node, seen)
 
+    @cached_property
+    def _collinear(self) -> tuple[np.ndarray, np.ndarray]:
+        """_collinear_edges of the scene, made by the first query that needs them: a build does not."""
+        return _collinear_edges(self.scene)
+
     def _faces_along(self, edge: int, s: float) -> list[tuple[int, int]]:
         """(face, its edge) pairs around the point at parameter s of `edge`: the edge's own faces, and those of
         other edges on the same line that hold the point (two boxes side by side: the top edges at their
         contact overlap, and each box's faces there close around the other's edge as well)."""
         scene = self.scene
         faces = [(int(face), edge) for face in scene.edge_polygons(edge)]
-        others = self._collinear_edges[self._collinear_offsets[edge] : self._collinear_offsets[edge + 1]]
+        offsets, collinear = self._collinear
+        others = collinear[offsets[edge] : offsets[edge + 1]]
         if len(others) == 0:
             return faces
         a, b = scene.vertices[scene.edges[edge]]
