@@ -621,33 +621,30 @@ class Skeleton:
         arc = _arc_of_pieces(offsets)
         seen = np.full((len(arc), 2), -1, dtype=np.int32)
 
-        def probe_side(lo: int, hi: int, vertex, edge, apex, column: int) -> None:
+        def probe_side(column: int, _) -> None:
             side = 1.0 if column == 0 else -1.0
-            directions = _probe_directions(
-                vertex, edge, piece_s[lo:hi], scene.vertices, scene.edges, side * _PROBE_LENGTHS * scene.tol.length,
-            )  # fmt: skip
-            free = _lines_leave_freely(
-                vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
-                topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
-                self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
-                scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
-            )  # fmt: skip
-            polygon, _, _ = first_hits(scene, self.bvh, apex, directions)
-            hit = np.flatnonzero(free & (polygon >= 0))
-            seen[lo + hit, column] = topo.face_group[polygon[hit]]
-
-        # the two sides of the pieces are probed at once (the kernels release the GIL); the rays of all pieces at
-        # once would set the peak memory of a build
-        threads = min(2, WORKERS) if len(arc) >= _PROBED_ON_ONE_THREAD else 1
-        with ThreadPoolExecutor(threads) as pool:
+            # the rays of all pieces at once would set the peak memory of a build
             for lo in range(0, len(arc), _PROBED_AT_ONCE):
-                _return_free_memory()
                 hi = min(lo + _PROBED_AT_ONCE, len(arc))
                 vertex = arcs.codes[arc[lo:hi], 0].astype(np.int64)
                 edge = (arcs.codes[arc[lo:hi], 1] - nv).astype(np.int64)
-                apex = scene.vertices[vertex]
-                for done in [pool.submit(probe_side, lo, hi, vertex, edge, apex, column) for column in (0, 1)]:
-                    done.result()
+                directions = _probe_directions(
+                    vertex, edge, piece_s[lo:hi], scene.vertices, scene.edges,
+                    side * _PROBE_LENGTHS * scene.tol.length,
+                )  # fmt: skip
+                free = _lines_leave_freely(
+                    vertex, directions, scene.polygon_points, scene.polygon_offsets, scene.normals,
+                    topo.vertex_face_offsets, topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets,
+                    self._rest_faces, self._other_offsets, self._other_codes, scene.edge_face_offsets,
+                    scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
+                )  # fmt: skip
+                polygon, _, _ = first_hits(scene, self.bvh, scene.vertices[vertex], directions)
+                hit = np.flatnonzero(free & (polygon >= 0))
+                seen[lo + hit, column] = topo.face_group[polygon[hit]]
+
+        # the two sides of the pieces (columns 0 and 1 of seen, as slices) are probed at once: the kernels release
+        # the GIL
+        _on_threads(probe_side, [(0, 1), (1, 2)], min(2, WORKERS) if len(arc) >= _PROBED_ON_ONE_THREAD else 1)
         return Probes(offsets, piece_s, piece_node, seen)
 
     @cached_property
@@ -816,6 +813,8 @@ def _arcs_by_key_range(parts: list, node_id, edge_tol, n_vertices: int, n_edges:
             piece.kind, piece.codes, piece.end, piece.s, piece.direction, node_id[piece.node], edge_tol, n_vertices,
         )  # fmt: skip
 
+    if pieces == 1:
+        return _concatenated(Arcs, [assembled(part) for part in _pieces_by_key_range(parts, bounds, n_codes, release)])
     arcs = []
     with ThreadPoolExecutor(WORKERS) as pool:
         running = []
@@ -855,17 +854,25 @@ def _pieces_by_key_range(parts: list, bounds: np.ndarray, n_codes: int, release:
                 for lo, hi in zip(cuts[:-1], cuts[1:], strict=True)]  # fmt: skip
 
     ranges: list[list[IncidenceChunk]] = [[] for _ in range(n_ranges)]
-    parts.reverse()
-    # a part per thread is split at once (numpy's sorts and takes release the GIL), kept in the parts' order
-    with ThreadPoolExecutor(WORKERS) as pool:
-        splitting: deque = deque()
-        while parts or splitting:
-            while parts and len(splitting) < WORKERS:
-                splitting.append(pool.submit(split, parts.pop()))
-            for k, piece in enumerate(splitting.popleft().result()):
-                if piece is not None:
-                    ranges[k].append(piece)
-            _return_free_memory()
+
+    def keep(split_part: list) -> None:
+        for k, piece in enumerate(split_part):
+            if piece is not None:
+                ranges[k].append(piece)
+        _return_free_memory()
+
+    # the empty part of a skeleton built for no source yet holds no row to split
+    parts[:] = [part for part in reversed(parts) if len(part)]
+    if len(parts) == 1:
+        keep(split(parts.pop()))
+    else:
+        # a part per thread is split at once (numpy's sorts and takes release the GIL), kept in the parts' order
+        with ThreadPoolExecutor(WORKERS) as pool:
+            splitting: deque = deque()
+            while parts or splitting:
+                while parts and len(splitting) < WORKERS:
+                    splitting.append(pool.submit(split, parts.pop()))
+                keep(splitting.popleft().result())
     for pieces in ranges:
         yield _concatenated(IncidenceChunk, pieces)
 
@@ -1067,7 +1074,8 @@ def _on_threads(run: Callable, slices: list[tuple[int, int]], workers: int | Non
     """[run(lo, hi) for each slice], on `workers` threads at once (None: one per slice), each taking the next
     slice when done with one: `run` calls kernels that release the GIL."""
     workers = len(slices) if workers is None else min(max(1, workers), len(slices))
-    if workers == 1:
+    # a thread's start costs more than an empty slice: a skeleton built for no source yet has only those
+    if workers == 1 or sum(hi > lo for lo, hi in slices) <= 1:
         return [run(*bound) for bound in slices]
     with ThreadPoolExecutor(workers) as pool:
         return list(pool.map(lambda bound: run(*bound), slices))
