@@ -1,22 +1,22 @@
 """Benchmark `skeleton`: Visibility Skeleton construction and queries on the office family (seed 003, Table 1).
 
-Per office size (84 ... 1488 polygons, the sizes of Table 1), built --repeats times (3): the median build's
-seconds (and the fastest and slowest build's), nodes and arcs by type (whatever keys skel.stats reports),
-skeleton bytes (skel.stats['bytes']), the largest peak resident memory of the builds and peak above the resident
-memory before it (python, numba, the scene), and the paper's Table 1 row at that size (time on a 195 MHz
-R10000, memory, thousands of nodes and arcs) with our speed-up; the median build's CPU seconds (all threads)
-and its CPU microseconds per node, beside what the 30x target leaves per node on this machine's cores (Table 1's
-time over 30, times the cores, over our nodes): where the target is missed, how much cheaper a node must get;
-and how many times one thread's work the cores do at once (a register-only numba loop alone, then on every core),
-measured after the builds: the core count on a quiet machine, less when another job shared the cores during the
-run (or vCPUs share a physical core), which makes the run's times too slow to compare with others.
-Then the growth exponent of time against polygons (least squares on log-log; the paper: n^2.4), the lazy build
-from one source (the first light) against the full build on the largest size (paper, 1488 polygons: 4 min 15 s
-against 31 min 59 s), and on that skeleton the query costs: form_factor and visible_boundary per vertex view,
-discontinuities and blockers per (light, receiver) pair (paper: 1.2-1.5 ms per view, 1.3-28.6 ms per
-discontinuity mesh, 4 ms for a blocker list), interactions per polygon (the paper gives no time).
-Targets of issue 3: at least 30x faster than Table 1 at every size, at most 416 MB at 1488 polygons, the
-one-source lazy build at least 5x faster than the full build there.
+Per office size (84 ... 1488 polygons, the sizes of Table 1), built --repeats times (3): the median build's seconds
+(and the fastest and slowest build's), nodes and arcs by type (whatever keys skel.stats reports), skeleton bytes
+(skel.stats['bytes']), the largest peak resident memory of the builds and peak above the resident memory before it
+(python, numba, the scene; the C heap's free pages handed back first), and the paper's Table 1 row at that size
+(time on a 195 MHz R10000, memory, thousands of nodes and arcs) with our speed-up; the median build's CPU seconds
+(all threads) and its CPU microseconds per node, beside what the 30x target leaves per node on this machine's cores
+(Table 1's time over 30, times the cores, over our nodes): where the target is missed, how much cheaper a node must
+get; and how many times one thread's work the cores do at once (a register-only numba loop alone, then on every
+core), measured after the builds: the core count on a quiet machine, less when another job shared the cores during
+the run (or vCPUs share a physical core), which makes the run's times too slow to compare with others. Then the
+growth exponent of time against polygons (least squares on log-log; the paper: n^2.4), the lazy build from one
+source (the first light) against the full build on the largest size (paper, 1488 polygons: 4 min 15 s against 31 min
+59 s), and on that skeleton the query costs: form_factor and visible_boundary per vertex view, discontinuities and
+blockers per (light, receiver) pair (paper: 1.2-1.5 ms per view, 1.3-28.6 ms per discontinuity mesh, 4 ms for a
+blocker list), interactions per polygon (the paper gives no time). Targets of issue 3: at least 30x faster than
+Table 1 at every size, at most 416 MB at 1488 polygons, the one-source lazy build at least 5x faster than the full
+build there.
 
     python -m bench skeleton [--sizes 84,168,...] [--quick] [--repeats 3] [--views N] [--pairs N]
                              [--interactions N] [--seed S] [--progress]
@@ -27,6 +27,7 @@ one-source lazy build at least 5x faster than the full build there.
 """
 
 import argparse
+import ctypes
 import gc
 import os
 import re
@@ -64,6 +65,10 @@ THROUGHPUT_STEPS = 5_000_000
 MB = 2.0**20
 _STATUS = Path("/proc/self/status")
 _CLEAR_REFS = Path("/proc/self/clear_refs")
+try:
+    _MALLOC_TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+except (OSError, AttributeError):
+    _MALLOC_TRIM = None
 
 
 @njit(cache=True, nogil=True)
@@ -99,6 +104,15 @@ def _reset_peak() -> bool:
         return True
     except OSError:
         return False
+
+
+def _release_free_heap() -> None:
+    """Hand the C heap's free pages back to the system (glibc's malloc_trim; nothing elsewhere) before a build's
+    baseline is read: the pages an earlier build freed but the allocator kept would count in the baseline, and
+    the build reusing them would seem to need less (office-1488 after the smaller sizes: 350 MB above a baseline
+    of 466 MB in one run, 448 MB above 331 MB in another, its peak 816 and 779 MB; 2026-11-28)."""
+    if _MALLOC_TRIM is not None:
+        _MALLOC_TRIM(0)
 
 
 def _status_bytes(field: str) -> int | None:
@@ -138,6 +152,7 @@ def _build(build_skeleton, scene, label: str, show_progress: bool, sources=None)
     The previous skeleton is dropped by the caller before: its memory is not the build's."""
     progress = _progress_printer(label) if show_progress else None
     gc.collect()
+    _release_free_heap()
     isolated = _reset_peak()
     before = _status_bytes("VmRSS") or 0
     cpu_before = time.process_time()

@@ -109,3 +109,15 @@ def test_query_timings_exclude_every_first_call():
     for query in ("form_factor", "visible_boundary", "discontinuities", "blockers", "interactions"):
         assert costs[f"{query}_max_ms"] < 1e3 * FIRST_CALL_SECONDS / 3, query
     assert len({args for name, args in skeleton.seen if name == "discontinuities"}) == 8
+
+
+def test_the_baseline_of_a_build_is_read_after_the_free_heap_is_handed_back(monkeypatch):
+    import bench.skeleton as benchmark
+
+    events = []
+    status = benchmark._status_bytes
+    monkeypatch.setattr(benchmark, "_release_free_heap", lambda: events.append("release"))
+    monkeypatch.setattr(benchmark, "_status_bytes", lambda field: events.append(field) or status(field))
+    construction(lambda scene, sources=None, progress=None: _StubSkeleton(), [84], show_progress=False)
+    assert "VmRSS" in events
+    assert "release" in events[: events.index("VmRSS")]
