@@ -27,7 +27,6 @@ build there.
 """
 
 import argparse
-import ctypes
 import gc
 import os
 import re
@@ -65,10 +64,6 @@ THROUGHPUT_STEPS = 5_000_000
 MB = 2.0**20
 _STATUS = Path("/proc/self/status")
 _CLEAR_REFS = Path("/proc/self/clear_refs")
-try:
-    _MALLOC_TRIM = ctypes.CDLL("libc.so.6").malloc_trim
-except (OSError, AttributeError):
-    _MALLOC_TRIM = None
 
 
 @njit(cache=True, nogil=True)
@@ -110,9 +105,12 @@ def _release_free_heap() -> None:
     """Hand the C heap's free pages back to the system (glibc's malloc_trim; nothing elsewhere) before a build's
     baseline is read: the pages an earlier build freed but the allocator kept would count in the baseline, and
     the build reusing them would seem to need less (office-1488 after the smaller sizes: 350 MB above a baseline
-    of 466 MB in one run, 448 MB above 331 MB in another, its peak 816 and 779 MB; 2026-11-28)."""
-    if _MALLOC_TRIM is not None:
-        _MALLOC_TRIM(0)
+    of 466 MB in one run, 448 MB above 331 MB in another, its peak 816 and 779 MB; 2026-11-28). The skeleton's own
+    handle on malloc_trim, trimming at once, not after its growth rule."""
+    from core.skeleton import skeleton as skeleton_module
+
+    if skeleton_module._malloc_trim is not None:
+        skeleton_module._malloc_trim(0)
 
 
 def _status_bytes(field: str) -> int | None:
