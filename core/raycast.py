@@ -40,7 +40,9 @@ CONTACT_EDGE = 2
 CONTACT_VERTEX = 3
 CONTACT_SLIDING = 4
 
-_TWO_PI = 2.0 * np.pi
+# directions around a segment are measured in quarter turns (see _quarter_turns): a full turn is 4
+_TURN = 4.0
+_HALF_TURN = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -381,15 +383,33 @@ def _sliding_contact(points, first, count, normal, start, end, tol):
 @njit(cache=True)
 def _wrap_angle(angle):
     while angle < 0.0:
-        angle += _TWO_PI
-    while angle >= _TWO_PI:
-        angle -= _TWO_PI
+        angle += _TURN
+    while angle >= _TURN:
+        angle -= _TURN
     return angle
 
 
 @njit_leaf
+def _quarter_turns(y, x):
+    """The direction of (x, y) as a number in [0, 4) that grows with its angle from +x, a quarter turn per unit
+    and the opposite direction 2 apart (the "diamond angle"); 0 for (0, 0). It orders directions as the angle
+    does, at the cost of a division, against arc tangents that took 3 % of a build; its gaps are between half
+    and all of the angle's."""
+    if y >= 0.0:
+        if x >= 0.0:
+            return 0.0 if x + y == 0.0 else y / (x + y)
+        return 1.0 - x / (y - x)
+    if x < 0.0:
+        return 2.0 - y / (-x - y)
+    # a direction just below +x rounds to a full turn: it is +x
+    turns = 3.0 + x / (x - y)
+    return turns if turns < _TURN else 0.0
+
+
+@njit_leaf
 def _contact_arc(points, offsets, normals, polygon, kind, local, e1, e2):
-    """The directions around the segment (start angle, length) in which the face extends from the contact.
+    """The directions around the segment (start, length, in quarter turns: _quarter_turns) in which the face
+    extends from the contact.
 
     Projected along the segment onto the plane (e1, e2), a face touched along edge k is a half-plane and a
     face touched at corner k is the convex sector between its two edges. Points are read by component: a
@@ -414,19 +434,15 @@ def _contact_arc(points, offsets, normals, polygon, kind, local, e1, e2):
         if cu * wv - cv * wu < 0.0:
             cu = -cu
             cv = -cv
-        return _wrap_angle(np.arctan2(cv, cu)), np.pi
+        return _quarter_turns(cv, cu), _HALF_TURN
     previous = first + (local - 1) % count
     following = first + (local + 1) % count
-    alpha = _wrap_angle(
-        np.arctan2(_corner_dot(points, previous, corner, e2), _corner_dot(points, previous, corner, e1))
-    )
-    beta = _wrap_angle(
-        np.arctan2(_corner_dot(points, following, corner, e2), _corner_dot(points, following, corner, e1))
-    )
+    alpha = _quarter_turns(_corner_dot(points, previous, corner, e2), _corner_dot(points, previous, corner, e1))
+    beta = _quarter_turns(_corner_dot(points, following, corner, e2), _corner_dot(points, following, corner, e1))
     sweep = _wrap_angle(beta - alpha)
-    if sweep <= np.pi:
+    if sweep <= _HALF_TURN:
         return alpha, sweep
-    return beta, _TWO_PI - sweep
+    return beta, _TURN - sweep
 
 
 @njit(cache=True)
@@ -451,7 +467,7 @@ def _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, bounds):
     total = 0.0
     for i in range(count):
         total += arc_length[i]
-    if total < _TWO_PI - angle_tol:
+    if total < _TURN - angle_tol:
         return False
     for i in range(count):
         bounds[2 * i] = arc_start[i]
@@ -466,7 +482,7 @@ def _arcs_cover_circle_with(arc_start, arc_length, count, angle_tol, bounds):
         bounds[j] = value
     for i in range(2 * count):
         lo = bounds[i]
-        hi = bounds[i + 1] if i + 1 < 2 * count else bounds[0] + _TWO_PI
+        hi = bounds[i + 1] if i + 1 < 2 * count else bounds[0] + _TURN
         if hi - lo <= angle_tol:
             continue
         middle = _wrap_angle(0.5 * (lo + hi))

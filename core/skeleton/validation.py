@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 from ..bvh import STACK_SIZE
 from ..jit import njit_leaf
 from ..raycast import (
+    _TURN,
     CONTACT_EDGE,
     CONTACT_INTERIOR,
     CONTACT_SLIDING,
@@ -282,13 +283,13 @@ def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, dire
 
 @njit_leaf
 def _turn(angle):
-    """angle % (2 pi) for an angle in (-2 pi, 4 pi), the same number (up to the sign of a zero): numba's float
-    modulo calls the C library's fmod (1 % of office-432's samples), and a difference of two numbers within a
-    factor two of each other is exact (Sterbenz), as is fmod."""
+    """angle % 4 (a full turn: core.raycast._quarter_turns) for an angle in (-4, 8), the same number (up to the
+    sign of a zero): numba's float modulo calls the C library's fmod (1 % of office-432's samples), and a
+    difference of two numbers within a factor two of each other is exact (Sterbenz), as is fmod."""
     if angle < 0.0:
-        return angle + 2.0 * np.pi
-    if angle >= 2.0 * np.pi:
-        return angle - 2.0 * np.pi
+        return angle + _TURN
+    if angle >= _TURN:
+        return angle - _TURN
     return angle
 
 
@@ -329,7 +330,7 @@ def _enters(points, offsets, normals, faces, kinds, corners, count, direction, e
         ordered[j] = value
     for k in range(2 * n):
         lo = ordered[k]
-        hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + 2.0 * np.pi
+        hi = ordered[k + 1] if k + 1 < 2 * n else ordered[0] + _TURN
         if hi - lo <= cosine:
             continue
         middle = _turn(0.5 * (lo + hi))
