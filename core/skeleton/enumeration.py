@@ -2558,6 +2558,7 @@ def _face_candidates(
     at = np.empty((n_edges, 3))
     others = np.empty((3, 3))
     u = np.empty(3)
+    d = np.empty(3)
     for index in range(lo, hi):
         f = polygon_ids[index]
         if lazy and not _plane_near_sources(f, src, normals, plane_offsets, centres, radii, tol):
@@ -2566,29 +2567,37 @@ def _face_candidates(
         first = offsets[f]
         corners = offsets[f + 1] - first
         k = 0
+        n0, n1, n2 = normal[0], normal[1], normal[2]
         for e in range(n_edges):
             if not emask[e]:
                 continue
-            a = vertices[edges[e, 0]]
-            b = vertices[edges[e, 1]]
-            ha = _dot(normal, a) + plane_offsets[f]
-            hb = _dot(normal, b) + plane_offsets[f]
+            # coordinates as numbers: row views cost two reference counts each, for every face and edge
+            ia = edges[e, 0]
+            ib = edges[e, 1]
+            ha = n0 * vertices[ia, 0] + n1 * vertices[ia, 1] + n2 * vertices[ia, 2] + plane_offsets[f]
+            hb = n0 * vertices[ib, 0] + n1 * vertices[ib, 1] + n2 * vertices[ib, 2] + plane_offsets[f]
             # strictly across: an edge ending in the plane meets it at a vertex (VEE / VV lines)
             if ha * hb >= 0.0 or abs(ha) <= tol or abs(hb) <= tol:
                 continue
             crossing[k] = e
             w = ha / (ha - hb)
             for c in range(3):
-                at[k, c] = a[c] + w * (b[c] - a[c])
+                at[k, c] = vertices[ia, c] + w * (vertices[ib, c] - vertices[ia, c])
             k += 1
         for i in range(k):
             p = at[i]
+            p0, p1, p2 = p[0], p[1], p[2]
             for j in range(i + 1, k):
-                d = at[j] - p
-                length = _norm(d)
+                # by component into d: array expressions here allocated, for every pair of crossings of every face
+                d0 = at[j, 0] - p0
+                d1 = at[j, 1] - p1
+                d2 = at[j, 2] - p2
+                length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
                 if length <= tol:
                     continue
-                d = d / length
+                d[0] = d0 / length
+                d[1] = d1 / length
+                d[2] = d2 / length
                 # the line p + t d (in the plane) crosses the polygon over [t_in, t_out]
                 t_in = -np.inf
                 t_out = np.inf
@@ -2596,8 +2605,9 @@ def _face_candidates(
                 e_out = -1
                 outside = False
                 for c in range(first, first + corners):
-                    offset = _dot(p - points[c], edge_out[c])
-                    rate = _dot(d, edge_out[c])
+                    offset = (p0 - points[c, 0]) * edge_out[c, 0] + (p1 - points[c, 1]) * edge_out[c, 1] + \
+                        (p2 - points[c, 2]) * edge_out[c, 2]  # fmt: skip
+                    rate = d[0] * edge_out[c, 0] + d[1] * edge_out[c, 1] + d[2] * edge_out[c, 2]
                     if abs(rate) <= angle_tol:
                         if offset > -tol:
                             outside = True
@@ -2616,7 +2626,13 @@ def _face_candidates(
                 # through a corner of the polygon: the line meets a vertex there (a VEE line)
                 corner = False
                 for c in range(first, first + corners):
-                    if _norm(_cross(points[c] - p, d)) <= tol:
+                    r0 = points[c, 0] - p0
+                    r1 = points[c, 1] - p1
+                    r2 = points[c, 2] - p2
+                    x0 = r1 * d[2] - r2 * d[1]
+                    x1 = r2 * d[0] - r0 * d[2]
+                    x2 = r0 * d[1] - r1 * d[0]
+                    if np.sqrt(x0 * x0 + x1 * x1 + x2 * x2) <= tol:
                         corner = True
                         break
                 if corner:
@@ -2737,16 +2753,22 @@ def _junction_candidates(
     d = np.empty(3)
     for v in vertex_ids:
         w = vertices[v]
+        w0, w1, w2 = w[0], w[1], w[2]
         for extra in edge_ids:
-            if edges[extra, 0] == v or edges[extra, 1] == v:
+            ia = edges[extra, 0]
+            ib = edges[extra, 1]
+            if ia == v or ib == v:
                 continue
-            a = vertices[edges[extra, 0]]
-            b = vertices[edges[extra, 1]]
-            # v outside the edge's box grown by tol (most pairs stop here)
-            if (w[0] < min(a[0], b[0]) - tol or w[0] > max(a[0], b[0]) + tol
-                    or w[1] < min(a[1], b[1]) - tol or w[1] > max(a[1], b[1]) + tol
-                    or w[2] < min(a[2], b[2]) - tol or w[2] > max(a[2], b[2]) + tol):  # fmt: skip
+            # v outside the edge's box grown by tol (most pairs stop here). Coordinates as numbers: row views
+            # cost two reference counts each, for every vertex and edge
+            if (w0 < min(vertices[ia, 0], vertices[ib, 0]) - tol or w0 > max(vertices[ia, 0], vertices[ib, 0]) + tol
+                    or w1 < min(vertices[ia, 1], vertices[ib, 1]) - tol
+                    or w1 > max(vertices[ia, 1], vertices[ib, 1]) + tol
+                    or w2 < min(vertices[ia, 2], vertices[ib, 2]) - tol
+                    or w2 > max(vertices[ia, 2], vertices[ib, 2]) + tol):  # fmt: skip
                 continue
+            a = vertices[ia]
+            b = vertices[ib]
             len_extra = _norm(b - a)
             if len_extra <= tol:
                 continue
@@ -2890,17 +2912,24 @@ def _edge_crossings(emask, vertices, edges, tol):
         ux = (b[0] - a[0]) / len_e
         uy = (b[1] - a[1]) / len_e
         uz = (b[2] - a[2]) / len_e
+        lo0, hi0 = min(a[0], b[0]) - tol, max(a[0], b[0]) + tol
+        lo1, hi1 = min(a[1], b[1]) - tol, max(a[1], b[1]) + tol
+        lo2, hi2 = min(a[2], b[2]) - tol, max(a[2], b[2]) + tol
         for ib in range(ia + 1, edge_ids.shape[0]):
             f = edge_ids[ib]
-            p = vertices[edges[f, 0]]
-            q = vertices[edges[f, 1]]
-            # boxes apart by more than tol: no crossing (most pairs stop here)
-            if (min(p[0], q[0]) > max(a[0], b[0]) + tol or max(p[0], q[0]) < min(a[0], b[0]) - tol
-                    or min(p[1], q[1]) > max(a[1], b[1]) + tol or max(p[1], q[1]) < min(a[1], b[1]) - tol
-                    or min(p[2], q[2]) > max(a[2], b[2]) + tol or max(p[2], q[2]) < min(a[2], b[2]) - tol):  # fmt: skip
+            # boxes apart by more than tol: no crossing (most pairs stop here). Coordinates as numbers: a row
+            # view costs two reference counts, for every pair of edges of the scene
+            f0 = edges[f, 0]
+            f1 = edges[f, 1]
+            if (min(vertices[f0, 0], vertices[f1, 0]) > hi0 or max(vertices[f0, 0], vertices[f1, 0]) < lo0
+                    or min(vertices[f0, 1], vertices[f1, 1]) > hi1 or max(vertices[f0, 1], vertices[f1, 1]) < lo1
+                    or min(vertices[f0, 2], vertices[f1, 2]) > hi2
+                    or max(vertices[f0, 2], vertices[f1, 2]) < lo2):  # fmt: skip
                 continue
             if _share_vertex(edges, e, f):
                 continue
+            p = vertices[f0]
+            q = vertices[f1]
             ok, t, sf, gap = _meet(a[0], a[1], a[2], ux, uy, uz, p[0], p[1], p[2], q[0], q[1], q[2])
             if not ok or gap > tol:
                 continue
