@@ -68,6 +68,10 @@ _PROBE_LENGTHS = 1e3
 """How far (tolerance lengths) a probe line passes beside an arc's line at its edge: far above the tolerance a
 contact is decided within, far below the size of any feature of a sane scene."""
 
+_CHUNKS_IN_FLIGHT = 3
+"""Candidate chunks (enumeration.DEFAULT_CHUNK candidates, about 10 MB each) a build lets wait for validation or
+for their commit before it stops taking the enumeration's output."""
+
 
 @dataclass(frozen=True, eq=False)
 class Probes:
@@ -181,16 +185,17 @@ class Skeleton:
         def validated(candidates: NodeCandidates):
             if len(built):
                 candidates = _not_through(self.scene, candidates, built)
-            nodes, incidences, counters = validate_candidates(
+            return validate_candidates(
                 self.scene, self.topology, self.bvh, candidates, self.edge_mask, element_solid=element_solid,
                 face_region=face_region,
             )
-            nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)
-            return nodes, incidences, counters
 
         def commit(validation) -> None:
             nonlocal n_nodes
             nodes, incidences, counters = validation.result()
+            # merged here, on this thread, while the validation thread goes on with the next chunk: that thread's
+            # one serial step would leave a core idle at the end of every chunk
+            nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)
             rejected[:] += counters
             node_parts.append(nodes)
             incidence_parts.append(
@@ -202,25 +207,28 @@ class Skeleton:
             n_nodes += len(nodes)
             _return_free_memory()
 
-        # a chunk is validated on a thread of its own while the next one is enumerated: neither stage waits
-        # for the other's slowest slice to end, and the cores stay busy between chunks
+        # chunks are validated in order on a thread of their own while the next ones are enumerated: neither
+        # stage waits for the other's slowest slice to end. A validated chunk is committed as soon as it is
+        # done, and this loop waits for one only when _CHUNKS_IN_FLIGHT are queued: enumeration, which
+        # produces no more than its few pending work units while nobody takes them, goes on meanwhile
         with ThreadPoolExecutor(1) as pool:
-            in_flight = None
+            in_flight: deque = deque()
             for candidates, fraction in iter_candidates(
                 self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
                 cancel=cancel,
             ):  # fmt: skip
                 if cancel is not None and cancel():
                     raise CancelledError("skeleton construction cancelled")
-                # the pool's one thread takes this chunk when the previous one is validated
-                previous, in_flight = in_flight, (pool.submit(validated, candidates), fraction)
+                in_flight.append((pool.submit(validated, candidates), fraction))
                 del candidates
-                if previous is not None:
-                    commit(previous[0])
-                    yield previous[1]
-            if in_flight is not None:
-                commit(in_flight[0])
-                yield in_flight[1]
+                while in_flight and (in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT):
+                    done, done_fraction = in_flight.popleft()
+                    commit(done)
+                    yield done_fraction
+            while in_flight:
+                done, done_fraction = in_flight.popleft()
+                commit(done)
+                yield done_fraction
         if cancel is not None and cancel():
             raise CancelledError("skeleton construction cancelled")
         self._node_parts.extend(node_parts)
