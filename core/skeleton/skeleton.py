@@ -213,22 +213,29 @@ class Skeleton:
         # produces no more than its few pending work units while nobody takes them, goes on meanwhile
         with ThreadPoolExecutor(1) as pool:
             in_flight: deque = deque()
-            for candidates, fraction in iter_candidates(
-                self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
-                cancel=cancel,
-            ):  # fmt: skip
-                if cancel is not None and cancel():
-                    raise CancelledError("skeleton construction cancelled")
-                in_flight.append((pool.submit(validated, candidates), fraction))
-                del candidates
-                while in_flight and (in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT):
+            try:
+                for candidates, fraction in iter_candidates(
+                    self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
+                    cancel=cancel,
+                ):  # fmt: skip
+                    if cancel is not None and cancel():
+                        raise CancelledError("skeleton construction cancelled")
+                    in_flight.append((pool.submit(validated, candidates), fraction))
+                    del candidates
+                    while in_flight and (in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT):
+                        done, done_fraction = in_flight.popleft()
+                        commit(done)
+                        yield done_fraction
+                while in_flight:
                     done, done_fraction = in_flight.popleft()
                     commit(done)
                     yield done_fraction
-            while in_flight:
-                done, done_fraction = in_flight.popleft()
-                commit(done)
-                yield done_fraction
+            except BaseException:
+                # cancelled, failed or closed: the queued chunks are dropped, only the one being validated is
+                # waited for
+                for queued, _ in in_flight:
+                    queued.cancel()
+                raise
         if cancel is not None and cancel():
             raise CancelledError("skeleton construction cancelled")
         self._node_parts.extend(node_parts)
