@@ -182,6 +182,10 @@ class Skeleton:
         face_region = flat_regions(self.scene)
         edge_tol = _edge_tolerance(self.scene)
 
+        def check_cancel() -> None:
+            if cancel is not None and cancel():
+                raise CancelledError("skeleton construction cancelled")
+
         def validated(candidates: NodeCandidates):
             if len(built):
                 candidates = _not_through(self.scene, candidates, built)
@@ -218,26 +222,27 @@ class Skeleton:
                     self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
                     cancel=cancel,
                 ):  # fmt: skip
-                    if cancel is not None and cancel():
-                        raise CancelledError("skeleton construction cancelled")
+                    check_cancel()
                     in_flight.append((pool.submit(validated, candidates), fraction))
                     del candidates
+                    # the request is honoured after each chunk reported, not only between enumerated chunks
                     while in_flight and (in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT):
                         done, done_fraction = in_flight.popleft()
                         commit(done)
                         yield done_fraction
+                        check_cancel()
                 while in_flight:
                     done, done_fraction = in_flight.popleft()
                     commit(done)
                     yield done_fraction
+                    check_cancel()
             except BaseException:
                 # cancelled, failed or closed: the queued chunks are dropped, only the one being validated is
                 # waited for
                 for queued, _ in in_flight:
                     queued.cancel()
                 raise
-        if cancel is not None and cancel():
-            raise CancelledError("skeleton construction cancelled")
+        check_cancel()
         self._node_parts.extend(node_parts)
         self._incidence_parts.extend(incidence_parts)
         # _finish lets each piece go once joined: no other reference may keep it
