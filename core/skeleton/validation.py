@@ -36,7 +36,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..bvh import STACK_SIZE
-from ..jit import njit_leaf
+from ..jit import by_reference, dereferenced, njit_leaf
 from ..raycast import (
     _TURN,
     CONTACT_EDGE,
@@ -118,17 +118,17 @@ _SIDE_EPS = 1e-9
 
 _Geometry = namedtuple(
     "_Geometry",
-    "points offsets normals areas vertices edges vf_off vf_face vf_corner ef_off ef_face ef_local corner_edge "
-    "face_group object_ids element_solid face_region split_edge diag tol angle_tol",
+    "points offsets normals areas vertices edges edge_unit vf_off vf_face vf_corner ef_off ef_face ef_local "
+    "corner_edge face_group object_ids element_solid face_region split_edge diag tol angle_tol",
 )
 """The read-only scene the kernels share (a numba named tuple): polygon points (P, 3) float64 and offsets (F + 1,)
-int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64; the faces around each
-vertex (vf_off (V + 1,), vf_face and vf_corner, int64) and each edge (ef_off (E + 1,), ef_face and ef_local,
-int64); corner_edge (P,) int64 the edge from each polygon corner to the next; face_group and object_ids (F,)
-int64; element_solid (V + E,) int64 the closed convex object all faces of each vertex, then each edge, belong to
-(-1: none, see element_solids); face_region (F,) int64 each face's flat region (see flat_regions)
-and split_edge (E,) bool whether a face of the edge shares its region with another (_flush_faces); the scene's diagonal,
-tol.length and tol.cosine (floats)."""
+int64, normals (F, 3) and areas (F,) float64; vertices (V, 3) float64, edges (E, 2) int64 and edge_unit (E, 3)
+float64 their unit directions (_edge_units); the faces around each vertex (vf_off (V + 1,), vf_face and vf_corner,
+int64) and each edge (ef_off (E + 1,), ef_face and ef_local, int64); corner_edge (P,) int64 the edge from each
+polygon corner to the next; face_group and object_ids (F,) int64; element_solid (V + E,) int64 the closed convex
+object all faces of each vertex, then each edge, belong to (-1: none, see element_solids); face_region (F,) int64
+each face's flat region (see flat_regions) and split_edge (E,) bool whether a face of the edge shares its region with
+another (_flush_faces); the scene's diagonal, tol.length and tol.cosine (floats)."""
 
 _Line = namedtuple(
     "_Line", "c_poly c_kind c_local g_lo g_hi g_tau n_groups sl_poly sl_a sl_b n_sliding start u f1 f2"
@@ -534,11 +534,11 @@ def _sandwiched(points, offsets, normals, object_ids, sl_poly, sl_a, sl_b, n_sli
 
 
 @njit_leaf
-def _slide_along(vertices, edges, edge, delta, f1, f2):
+def _slide_along(edge_unit, edges, edge, delta, f1, f2):
     """(d, slide): the unit direction d of `edge` and how far along d the point where a line meets it moves
     when the line is moved by the small 3-vector `delta` across it (frame f1, f2): the part of delta across
     the line that the edge gives. slide is NaN when the edge runs along the line (it gives none)."""
-    d = _edge_direction(vertices, edges, edge, -1)
+    d = _edge_direction(edge_unit, edges, edge, -1)
     w1 = _dot(d, f1)
     w2 = _dot(d, f2)
     if w1 * w1 + w2 * w2 <= 1e-24:
@@ -547,8 +547,8 @@ def _slide_along(vertices, edges, edge, delta, f1, f2):
 
 
 @njit_leaf
-def _pressed_between_contacts(points, offsets, normals, vertices, edges, object_ids, sl_poly, n_sliding, in_plane,
-                              crossing, delta, edge_a, edge_b, f1, f2, angle_tol, tol):  # fmt: skip
+def _pressed_between_contacts(points, offsets, normals, edge_unit, edges, object_ids, sl_poly, n_sliding,
+                              in_plane, crossing, delta, edge_a, edge_b, f1, f2, angle_tol, tol):  # fmt: skip
     """Whether lines moved by the small 3-vector `delta` (across the line, frame f1, f2) off the point `crossing`
     of edges edge_a and edge_b, meeting both, run between their two contacts through the inside of two faces of
     different objects facing each other whose plane holds them (sl_poly[:n_sliding], where in_plane): objects
@@ -556,7 +556,7 @@ def _pressed_between_contacts(points, offsets, normals, vertices, edges, object_
     that the edge gives (_relaxed_arc's slide); the point halfway between them is tested to first order."""
     halfway = (0.0, 0.0, 0.0)
     for edge in (edge_a, edge_b):
-        d, slide = _slide_along(vertices, edges, edge, delta, f1, f2)
+        d, slide = _slide_along(edge_unit, edges, edge, delta, f1, f2)
         if not np.isfinite(slide):
             return False
         halfway = _along(halfway, 0.5 * slide, d)
@@ -607,15 +607,23 @@ def _solve4(a, b, x):
     return True
 
 
+@njit(cache=True)
+def _edge_units(vertices, edges):
+    """(E, 3) float64: the unit direction of each edge from its first vertex."""
+    units = np.empty((edges.shape[0], 3))
+    for e in range(edges.shape[0]):
+        d = _minus(_row(vertices, edges[e, 1]), _row(vertices, edges[e, 0]))
+        units[e, 0], units[e, 1], units[e, 2] = _over(d, np.sqrt(_dot(d, d)))
+    return units
+
+
 @njit_leaf
-def _edge_direction(vertices, edges, e, away_from):
-    """Unit direction (3-tuple) of edge e, from its first vertex, or away from vertex `away_from` if >= 0."""
-    a = _row(vertices, edges[e, 0])
-    b = _row(vertices, edges[e, 1])
-    d = _minus(b, a)
+def _edge_direction(edge_unit, edges, e, away_from):
+    """Unit direction (3-tuple) of edge e (edge_unit: _edge_units), from its first vertex, or away from vertex
+    `away_from` if >= 0 (the same numbers, negated: a - b is exactly -(b - a))."""
     if away_from >= 0 and edges[e, 1] == away_from:
-        d = _minus(a, b)
-    return _over(d, np.sqrt(_dot(d, d)))
+        return -edge_unit[e, 0], -edge_unit[e, 1], -edge_unit[e, 2]
+    return edge_unit[e, 0], edge_unit[e, 1], edge_unit[e, 2]
 
 
 @njit_leaf
@@ -700,9 +708,9 @@ def _near_plane(point, normal, offset, tol):
 
 
 @njit_leaf
-def _parallel_edges(vertices, edges, e, f, tol):
+def _parallel_edges(vertices, edge_unit, edges, e, f, tol):
     """Whether edge f stays within tol of a line parallel to edge e over its whole length."""
-    d = _edge_direction(vertices, edges, e, -1)
+    d = _edge_direction(edge_unit, edges, e, -1)
     span = _minus(_row(vertices, edges[f, 1]), _row(vertices, edges[f, 0]))
     along = _dot(span, d)
     off = _minus(span, _scaled(d, along))
@@ -767,7 +775,7 @@ def _flush_faces(ef_off, ef_face, face_region, split_edge, e, f):
 
 
 @njit_leaf
-def _coplanar_swath(vertices, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id, n, tol):
+def _coplanar_swath(vertices, edge_unit, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id, n, tol):
     """Whether an EEE arc's three edges share a plane or two bound one face (or faces of one flat region, see
     _flush_faces): the degenerate edge triples the paper rejects (1999, section 2.2); they are not visual events.
     Two parallel edges and a third piercing their plane are one: the pencil of that plane about the piercing
@@ -781,7 +789,7 @@ def _coplanar_swath(vertices, edges, ef_off, ef_face, face_region, split_edge, r
                 if _shared_face(ef_off, ef_face, r_id[j], r_id[k]) or \
                         _flush_faces(ef_off, ef_face, face_region, split_edge, r_id[j], r_id[k]):  # fmt: skip
                     return True
-                if _parallel_edges(vertices, edges, r_id[j], r_id[k], tol) and \
+                if _parallel_edges(vertices, edge_unit, edges, r_id[j], r_id[k], tol) and \
                         _aligned_pencil(vertices, edges, r_id[j], r_id[k], r_id[3 - j - k], tol):  # fmt: skip
                     return True
         a = _row(vertices, edges[r_id[0], 0])
@@ -845,7 +853,7 @@ def _segment_gap(vertices, edges, e, point):
 
 
 @njit_leaf
-def _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
+def _pivot(vertices, edge_unit, edges, r_kind, r_id, r_group, n_retained, tol):
     """The retained edge the lines of an EEE arc turn about, else -1: with three edges met at three points of
     the line, two of them spanning one plane (ends within tol of it) and the third piercing it, every line near
     this one meeting the two lies in their plane (a line meeting both elsewhere passes through the point where
@@ -862,7 +870,8 @@ def _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
         b = r_id[(k + 2) % 3]
         base = _row(vertices, edges[a, 0])
         # parallel edges span the plane holding one and the other's first end
-        across = _minus(_row(vertices, edges[b, 0]), base) if _parallel_edges(vertices, edges, a, b, tol) else \
+        parallel = _parallel_edges(vertices, edge_unit, edges, a, b, tol)
+        across = _minus(_row(vertices, edges[b, 0]), base) if parallel else \
             _minus(_row(vertices, edges[b, 1]), _row(vertices, edges[b, 0]))  # fmt: skip
         normal = _cross(_minus(_row(vertices, edges[a, 1]), base), across)
         length = np.sqrt(_dot(normal, normal))
@@ -918,13 +927,13 @@ def _plane_holds_generators(points, offsets, normals, vertices, edges, poly, r_k
 
 
 @njit_leaf
-def _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol):
+def _crossing_pair(vertices, edge_unit, edges, r_kind, r_id, r_group, n_retained, tol):
     """(a, b), a < b: two retained edges met at one point and not parallel (crossing there: objects in contact),
     else (-1, -1)."""
     for j in range(n_retained):
         for k in range(j + 1, n_retained):
             if r_group[k] == r_group[j] and r_kind[j] == GEN_EDGE and r_kind[k] == GEN_EDGE and \
-                    not _parallel_edges(vertices, edges, r_id[j], r_id[k], tol):  # fmt: skip
+                    not _parallel_edges(vertices, edge_unit, edges, r_id[j], r_id[k], tol):  # fmt: skip
                 return j, k
     return -1, -1
 
@@ -947,7 +956,8 @@ def _partner(pair, j):
 
 
 @njit_leaf
-def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sigma, scratch, incidences, n_inc, node):
+def _relaxed_arc(geometry_ref, line_ref, retained_ref, n_retained, norm_index, norm_dir, sigma, scratch_ref,
+                 incidences_ref, n_inc, node):  # fmt: skip
     """One arc adjacent to node `node` of `line` (_Line, its frame f1, f2 perpendicular to u) in the scene
     `geometry` (_Geometry), recorded at row n_inc of `incidences` (_Incidences) when it exists; returns the next
     free row. retained = (r_kind, r_id, r_group, r_pin), (3,) arrays: the retained generators, n_retained of them
@@ -955,13 +965,20 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     r_pin: for a retained edge met at one of its vertices, that vertex (its contact must move into the edge),
     else -1. scratch: the work arrays (_Scratch; x below: its solution, the motion's coefficients).
 
-    The named tuples are handed over whole (a leaf kernel, core.jit: no reference counts): unpacked into sixty
-    arguments by a wrapper, as before, office-312's validation took 1.6 % longer on one thread (2026-11-27).
+    The named tuples are handed over by address (`*_ref`, core.jit.by_reference): numba passes a tuple member by
+    member, and the 408 machine words of these five were copied on the stack at every call; by address, with
+    the unit edge directions looked up (_edge_units), office-432 builds 3 % faster (2026-11-29). Unpacked into
+    sixty arguments by a wrapper, office-312's validation took 1.6 % longer on one thread (2026-11-27).
 
     The row holds the arc kind, the generators in canonical line order, the end faces before and after them,
     the node's coordinate s on the arc's parameter edge (its lowest retained edge id, 0..1 from its first
     vertex) and the direction, +1 when the arc extends towards larger s."""
-    (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    scratch = dereferenced(scratch_ref)
+    incidences = dereferenced(incidences_ref)
+    (points, offsets, normals, areas, vertices, edges, edge_unit, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
      corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
      angle_tol) = geometry
     c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2 = line
@@ -972,11 +989,11 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     # their plane: the lines keep meeting both in that plane, turning about the point where the third kept
     # generator meets it (a pencil of the contact plane: seed 003's fv arcs of an FvE node, keyed as EEE)
     pencil = -1
-    pair = _crossing_pair(vertices, edges, r_kind, r_id, r_group, n_retained, tol)
+    pair = _crossing_pair(vertices, edge_unit, edges, r_kind, r_id, r_group, n_retained, tol)
     norm_partner = _partner(pair, norm_index)
     if norm_partner >= 0:
-        across = _cross(_edge_direction(vertices, edges, r_id[norm_index], -1),
-                        _edge_direction(vertices, edges, r_id[norm_partner], -1))  # fmt: skip
+        across = _cross(_edge_direction(edge_unit, edges, r_id[norm_index], -1),
+                        _edge_direction(edge_unit, edges, r_id[norm_partner], -1))  # fmt: skip
         if n_retained != 3 or abs(_dot(across, u)) > angle_tol * np.sqrt(_dot(across, across)):
             return n_inc
         pencil = 3 - norm_index - norm_partner
@@ -989,7 +1006,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
     # a pivot (see _pivot) moves by rounding only when solved for: held still, what meets the lines there
     # meets all of them. Sliding it cannot normalise the motion (the system is singular: nearly so by
     # rounding, a huge motion that is none), nor parametrise the arc (its lines would share one coordinate)
-    pivot = _pivot(vertices, edges, r_kind, r_id, r_group, n_retained, tol)
+    pivot = _pivot(vertices, edge_unit, edges, r_kind, r_id, r_group, n_retained, tol)
     if pivot >= 0:
         lowest = True
         for k in range(n_retained):
@@ -1030,7 +1047,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             rhs[row + 1] = sigma * w2
             row += 2
         else:
-            d = _edge_direction(vertices, edges, r_id[j], -1)
+            d = _edge_direction(edge_unit, edges, r_id[j], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
             system[row, 0] = -w2
@@ -1038,8 +1055,8 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             system[row, 2] = -w2 * tn
             system[row, 3] = w1 * tn
             row += 1
-    if row != 4 or _coplanar_swath(vertices, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id, n_retained,
-                                   tol):  # fmt: skip
+    if row != 4 or _coplanar_swath(vertices, edge_unit, edges, ef_off, ef_face, face_region, split_edge, r_kind, r_id,
+                                   n_retained, tol):  # fmt: skip
         return n_inc
     if not _solve4(system, rhs, x):
         return n_inc
@@ -1090,7 +1107,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             crossing_tau = g_tau[r_group[norm_index]]
             tn = crossing_tau / diag
             if _pressed_between_contacts(
-                points, offsets, normals, vertices, edges, object_ids, sl_poly, n_sliding, in_plane,
+                points, offsets, normals, edge_unit, edges, object_ids, sl_poly, n_sliding, in_plane,
                 _along(start, crossing_tau, u), _combined(x[0] + tn * x[2], f1, x[1] + tn * x[3], f2),
                 r_id[norm_index], r_id[norm_partner], f1, f2, angle_tol, tol,
             ):  # fmt: skip
@@ -1259,7 +1276,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             # the contact slides along the kept edge, so its position on the line moves too: a face met at
             # the same point is in front of the edge (the arc does not exist) or behind it (the line stops).
             # What can reject the arc comes before the faces closing around the edge, which cost arc tangents
-            d, slide = _slide_along(vertices, edges, r_id[j], delta, f1, f2)
+            d, slide = _slide_along(edge_unit, edges, r_id[j], delta, f1, f2)
             if not np.isfinite(slide):
                 return n_inc
             # an edge met at its end vertex only holds the lines whose contact moves into it
@@ -1268,7 +1285,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
             # so does the other edge of a pencil's pair, met at its end vertex too (objects touching corner to
             # corner): its contact slides along it off the corner as well
             if crossed >= 0 and r_pin[norm_partner] >= 0:
-                _, slide_crossed = _slide_along(vertices, edges, crossed, delta, f1, f2)
+                _, slide_crossed = _slide_along(edge_unit, edges, crossed, delta, f1, f2)
                 if not np.isfinite(slide_crossed):
                     return n_inc
                 if slide_crossed * (1.0 if edges[crossed, 0] == r_pin[norm_partner] else -1.0) <= _SIDE_EPS:
@@ -1483,7 +1500,7 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
         behind_of_pair = norm_index
         lowest = np.inf
         for m in (norm_index, norm_partner):
-            d = _edge_direction(vertices, edges, r_id[m], -1)
+            d = _edge_direction(edge_unit, edges, r_id[m], -1)
             w1 = _dot(d, f1)
             w2 = _dot(d, f2)
             slide = ((x[0] + tn * x[2]) * w1 + (x[1] + tn * x[3]) * w2) / (w1 * w1 + w2 * w2)
@@ -1530,10 +1547,11 @@ def _relaxed_arc(geometry, line, retained, n_retained, norm_index, norm_dir, sig
 
 
 @njit_leaf
-def _met_before(line, corner_element, offsets, g, i, contact_kind, element):
+def _met_before(line_ref, corner_element, offsets, g, i, contact_kind, element):
     """Whether one of the contacts of group g of the line before contact i is of contact_kind (CONTACT_EDGE or
     CONTACT_VERTEX) with `element` (an edge or vertex met by its faces gives a contact per face); corner_element:
     the scene's corner_edge or corner_vertex, to match the kind."""
+    line = dereferenced(line_ref)
     for earlier in range(line.g_lo[g], i):
         if line.c_kind[earlier] == contact_kind and \
                 corner_element[offsets[line.c_poly[earlier]] + line.c_local[earlier]] == element:  # fmt: skip
@@ -1542,8 +1560,9 @@ def _met_before(line, corner_element, offsets, g, i, contact_kind, element):
 
 
 @njit_leaf
-def _other_corner_at(line, corner_vertex, offsets, v, g):
+def _other_corner_at(line_ref, corner_vertex, offsets, v, g):
     """Whether group g of the line, holding vertex v, meets another vertex there (objects corner to corner)."""
+    line = dereferenced(line_ref)
     for i in range(line.g_lo[g], line.g_hi[g]):
         if line.c_kind[i] == CONTACT_VERTEX and corner_vertex[offsets[line.c_poly[i]] + line.c_local[i]] != v:
             return True
@@ -1551,14 +1570,18 @@ def _other_corner_at(line, corner_vertex, offsets, v, g):
 
 
 @njit_leaf
-def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v, tau_v, group_v,
-                   tau_w, gk, gid, ng):  # fmt: skip
+def _arcs_off_edge(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask, v, e_v,
+                   tau_v, group_v, tau_w, gk, gid, ng):  # fmt: skip
     """The EV arcs of vertex generator v (at tau_v, group group_v of the node's line) and each masked edge of
     another object crossing the line where it runs along v's edge e_v (up to its other end, at tau_w): the lines
     through v meeting that edge lie in the plane of both edges and turn at this line from one side of e_v to
     the other (off the face of e_v, or in under the object stacked across it), so these arcs start or end
     here. gk, gid: the node's ng generators (edges among them have their own arcs). Returns the next free row,
     or -1 when the rows run out (see _validate_from)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    incidences = dereferenced(incidences_ref)
     g_ = geometry
     edges = g_.edges
     offsets = g_.offsets
@@ -1573,10 +1596,10 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
                 continue
             e = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
             if not edge_mask[e] or edges[e, 0] == v or edges[e, 1] == v or \
-                    _parallel_edges(g_.vertices, edges, e_v, e, g_.tol):  # fmt: skip
+                    _parallel_edges(g_.vertices, g_.edge_unit, edges, e_v, e, g_.tol):  # fmt: skip
                 continue
             # once per edge: its faces give a contact each, and a generator edge has its own arcs
-            repeated = _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, e)
+            repeated = _met_before(line_ref, corner_edge, offsets, g, i, CONTACT_EDGE, e)
             for k in range(ng):
                 if gk[k] == GEN_EDGE and gid[k] == e:
                     repeated = True
@@ -1587,28 +1610,32 @@ def _arcs_off_edge(geometry, line, retained, scratch, incidences, n_inc, node, e
             r_kind, r_id, r_group, _ = retained
             r_kind[0], r_id[0], r_group[0] = GEN_VERTEX, v, group_v
             r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
-            norm_dir = _edge_direction(g_.vertices, edges, e, -1)
+            norm_dir = _edge_direction(g_.edge_unit, edges, e, -1)
             for sigma in (1.0, -1.0):
-                n_inc = _relaxed_arc(geometry, line, retained, 2, 1, norm_dir, sigma, scratch, incidences, n_inc, node)
+                n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 2, 1, norm_dir, sigma, scratch_ref,
+                                     incidences_ref, n_inc, node)  # fmt: skip
     return n_inc
 
 
 @njit_leaf
-def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
-                         group_v, extra, gk, gid, gg, ng):  # fmt: skip
+def _pencils_at_junction(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask,
+                         ve_off, ve_edge, v, group_v, extra, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the pencils in the plane of vertex generator v's edge e_v and another object's edge `extra`
     through v (a box's corner on the edge of a box beside or under it: a T-junction), about a generator edge
     piercing that plane: their lines cross both edges, the contact on e_v moving into it from v, as at a
     crossing of two edges (FXE nodes) away from its ends. gk, gid, gg: the node's ng generators and their
     groups. Returns the next free row (_validate_chunk leaves room for these rows)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
     g_ = geometry
     u = line.u
-    across_extra = _edge_direction(g_.vertices, g_.edges, extra, -1)
+    across_extra = _edge_direction(g_.edge_unit, g_.edges, extra, -1)
     for slot in range(ve_off[v], ve_off[v + 1]):
         e_v = ve_edge[slot]
         if not edge_mask[e_v]:
             continue
-        into = _edge_direction(g_.vertices, g_.edges, e_v, v)
+        into = _edge_direction(g_.edge_unit, g_.edges, e_v, v)
         normal = _cross(into, across_extra)
         length = np.sqrt(_dot(normal, normal))
         # e_v along `extra` (boxes side by side) spans no plane; lines off the plane are no pencil of it
@@ -1621,29 +1648,32 @@ def _pencils_at_junction(geometry, line, retained, scratch, incidences, n_inc, n
         if turn == 0.0:
             continue
         wedge = _along(into, _dot(_cross(u, into), normal) / turn, across_extra)
-        if _sliding_faces_meet_in(g_, line, _row(g_.vertices, v), wedge, _over(normal, length)):
+        if _sliding_faces_meet_in(geometry_ref, line_ref, _row(g_.vertices, v), wedge, _over(normal, length)):
             continue
         for k in range(ng):
             if gk[k] != GEN_EDGE:
                 continue
-            if abs(_dot(_edge_direction(g_.vertices, g_.edges, gid[k], -1), normal)) <= g_.angle_tol * length:
+            if abs(_dot(_edge_direction(g_.edge_unit, g_.edges, gid[k], -1), normal)) <= g_.angle_tol * length:
                 continue
             r_kind, r_id, r_group, r_pin = retained
             r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
             r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
             r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, group_v
-            n_inc = _relaxed_arc(geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node)
+            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 1, into, 1.0, scratch_ref, incidences_ref,
+                                 n_inc, node)  # fmt: skip
             r_pin[1] = -1
     return n_inc
 
 
 @njit_leaf
-def _swaths_leaving_both_vertices(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
-                                  ve_edge, gid, gg, extra, g):  # fmt: skip
+def _swaths_leaving_both_vertices(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node,
+                                  edge_mask, ve_off, ve_edge, gid, gg, extra, g):  # fmt: skip
     """The EEE arcs of a line through two vertex generators gid[0], gid[1] (groups gg) and meeting edge `extra`
     (group g): through `extra`, an edge of either vertex, the contacts on both moving into them from their
     vertices (the first vertex's edge normalises the motion, the second's is pinned). Returns the next free row
     (the caller leaves room for one per pair of edges)."""
+    geometry = dereferenced(geometry_ref)
+    retained = dereferenced(retained_ref)
     r_kind, r_id, r_group, r_pin = retained
     for slot in range(ve_off[gid[0]], ve_off[gid[0] + 1]):
         e_slide = ve_edge[slot]
@@ -1656,18 +1686,21 @@ def _swaths_leaving_both_vertices(geometry, line, retained, scratch, incidences,
             r_kind[0], r_id[0], r_group[0] = GEN_EDGE, e_slide, gg[0]
             r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
             r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
-            norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_slide, gid[0])
-            n_inc = _relaxed_arc(geometry, line, retained, 3, 0, norm_dir, 1.0, scratch, incidences, n_inc, node)
+            norm_dir = _edge_direction(geometry.edge_unit, geometry.edges, e_slide, gid[0])
+            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 0, norm_dir, 1.0, scratch_ref,
+                                 incidences_ref, n_inc, node)  # fmt: skip
             r_pin[1] = -1
     return n_inc
 
 
 @njit_leaf
-def _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, v, g, out, pins):
+def _corner_edges(geometry_ref, line_ref, edge_mask, ve_off, ve_edge, v, g, out, pins):
     """The masked edges the contact of a line through vertex v (met in group g of the line) may move into, written
     to `out`: v's own, the contact moving into them from v (pins: v), and other objects' edges holding v (a
     box's corner on the seam of two boxes side by side), the contact sliding either way (pins: -1). Returns how
     many."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
     count = 0
     for slot in range(ve_off[v], ve_off[v + 1]):
         if edge_mask[ve_edge[slot]]:
@@ -1680,7 +1713,7 @@ def _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, v, g, out, pins):
             continue
         e = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
         if edge_mask[e] and edges[e, 0] != v and edges[e, 1] != v and \
-                not _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, e):  # fmt: skip
+                not _met_before(line_ref, corner_edge, offsets, g, i, CONTACT_EDGE, e):  # fmt: skip
             out[count] = e
             pins[count] = -1
             count += 1
@@ -1688,11 +1721,15 @@ def _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, v, g, out, pins):
 
 
 @njit(cache=True)
-def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
-                                  ve_edge, gid, gg, x, g):  # fmt: skip
+def _swaths_leaving_three_corners(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node,
+                                  edge_mask, ve_off, ve_edge, gid, gg, x, g):  # fmt: skip
     """The EEE arcs of a line through two vertex generators gid[0], gid[1] (groups gg) grazing a third vertex x
     between them (group g): through an edge at each of the three corners (see _corner_edges), the contacts
     leaving all three at once. Returns the next free row, or -1 when the rows run out (see _validate_from)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    incidences = dereferenced(incidences_ref)
     corners = (gid[0], gid[1], x)
     groups = (gg[0], gg[1], g)
     size = 0
@@ -1702,7 +1739,7 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
     pins = np.empty((3, size), dtype=np.int64)
     counts = np.empty(3, dtype=np.int64)
     for k in range(3):
-        counts[k] = _corner_edges(geometry, line, edge_mask, ve_off, ve_edge, corners[k], groups[k], found[k],
+        counts[k] = _corner_edges(geometry_ref, line_ref, edge_mask, ve_off, ve_edge, corners[k], groups[k], found[k],
                                   pins[k])  # fmt: skip
     if n_inc + 2 * counts[0] * counts[1] * counts[2] > incidences.node.shape[0]:
         return -1
@@ -1716,10 +1753,11 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
                 r_kind[0], r_id[0], r_group[0], r_pin[0] = GEN_EDGE, e_a, groups[0], pins[0, a]
                 r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_b, groups[1], pins[1, b]
                 r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_c, groups[2], pins[2, c]
-                norm_dir = _edge_direction(geometry.vertices, geometry.edges, e_a, -1)
+                norm_dir = _edge_direction(geometry.edge_unit, geometry.edges, e_a, -1)
                 for sigma in (1.0, -1.0):
                     n_inc = _relaxed_arc(
-                        geometry, line, retained, 3, 0, norm_dir, sigma, scratch, incidences, n_inc, node
+                        geometry_ref, line_ref, retained_ref, 3, 0, norm_dir, sigma, scratch_ref, incidences_ref,
+                        n_inc, node
                     )
     for k in range(3):
         r_pin[k] = -1
@@ -1727,30 +1765,37 @@ def _swaths_leaving_three_corners(geometry, line, retained, scratch, incidences,
 
 
 @njit_leaf
-def _vertex_replaced_by_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j,
-                             extra, gk, gid, gg, ng):  # fmt: skip
+def _vertex_replaced_by_edge(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node,
+                             edge_mask, ve_off, ve_edge, j, extra, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the node's generators (gk, gid, gg: ng of them) with vertex generator j replaced by another
     object's edge `extra` holding it, the contact sliding either way along that edge, and the pencils of that
     junction (_pencils_at_junction). Returns the next free row (the caller leaves room for these rows)."""
+    geometry = dereferenced(geometry_ref)
+    retained = dereferenced(retained_ref)
     r_kind, r_id, r_group, _ = retained
     for k in range(ng):
         r_kind[k] = GEN_EDGE if k == j else gk[k]
         r_id[k] = extra if k == j else gid[k]
         r_group[k] = gg[k]
-    norm_dir = _edge_direction(geometry.vertices, geometry.edges, extra, -1)
+    norm_dir = _edge_direction(geometry.edge_unit, geometry.edges, extra, -1)
     for sigma in (1.0, -1.0):
-        n_inc = _relaxed_arc(geometry, line, retained, ng, j, norm_dir, sigma, scratch, incidences, n_inc, node)
+        n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, ng, j, norm_dir, sigma, scratch_ref,
+                             incidences_ref, n_inc, node)  # fmt: skip
     return _pencils_at_junction(
-        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid[j], gg[j], extra,
+        geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask, ve_off, ve_edge,
+        gid[j], gg[j], extra,
         gk, gid, gg, ng,
     )  # fmt: skip
 
 
 @njit_leaf
-def _angle_in_solid(geometry, line, scratch, group, into_a, into_b):
+def _angle_in_solid(geometry_ref, line_ref, scratch_ref, group, into_a, into_b):
     """Whether the points just inside the angle of unit directions into_a, into_b at the contact point of the
     line's group `group` lie inside a solid touching that point (see _goes_into_solid; the group's contacts are
     copied into scratch's contact rows)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    scratch = dereferenced(scratch_ref)
     g_ = geometry
     polys, kinds, locals_ = scratch.polys, scratch.kinds, scratch.locals_
     count = 0
@@ -1767,8 +1812,8 @@ def _angle_in_solid(geometry, line, scratch, group, into_a, into_b):
 
 
 @njit_leaf
-def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask,
-                              ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
+def _pencils_at_shared_corner(geometry_ref, corner_vertex, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc,
+                              node, edge_mask, ve_off, ve_edge, v, group_v, gk, gid, gg, ng):  # fmt: skip
     """The arcs of the pencils in the plane of vertex generator v's edge e_v and an edge e_w of another vertex w at
     v's point (objects touching corner to corner: a chair leg's top corner under the seat's corner) about a
     generator edge piercing that plane, when the node's line lies in it: their lines cross e_v and e_w near the
@@ -1776,8 +1821,12 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
     both contacts reach their edge's end at once (no node through one of the vertices and the other edge names
     them). gk, gid, gg: the node's ng generators and their groups. Returns the next free row, or -1 when the
     rows run out (see _validate_from)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    incidences = dereferenced(incidences_ref)
     g_ = geometry
-    vertices, edges, offsets = g_.vertices, g_.edges, g_.offsets
+    vertices, edges, edge_unit, offsets = g_.vertices, g_.edges, g_.edge_unit, g_.offsets
     u = line.u
     corner = _row(vertices, v)
     for i in range(line.g_lo[group_v], line.g_hi[group_v]):
@@ -1787,18 +1836,18 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
         if w == v:
             continue
         # once per vertex: each of its faces gives a contact
-        if _met_before(line, corner_vertex, offsets, group_v, i, CONTACT_VERTEX, w):
+        if _met_before(line_ref, corner_vertex, offsets, group_v, i, CONTACT_VERTEX, w):
             continue
         for slot_v in range(ve_off[v], ve_off[v + 1]):
             e_v = ve_edge[slot_v]
             if not edge_mask[e_v]:
                 continue
-            into_v = _edge_direction(vertices, edges, e_v, v)
+            into_v = _edge_direction(edge_unit, edges, e_v, v)
             for slot_w in range(ve_off[w], ve_off[w + 1]):
                 e_w = ve_edge[slot_w]
                 if not edge_mask[e_w]:
                     continue
-                into_w = _edge_direction(vertices, edges, e_w, w)
+                into_w = _edge_direction(edge_unit, edges, e_w, w)
                 normal = _cross(into_v, into_w)
                 length = np.sqrt(_dot(normal, normal))
                 # edges along each other span no plane; lines off the plane are no pencil of it
@@ -1807,15 +1856,16 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                 # the lines run between their contacts within the angle of the two edges at the corner: where two
                 # objects touch there face against face (those of the edges, or a third one's face under both: a
                 # box stacked on another, its corner on the other's edge), such lines are inside the solids
-                if _sliding_faces_meet_in(g_, line, corner, _along(into_v, 1.0, into_w), _over(normal, length)):
+                if _sliding_faces_meet_in(geometry_ref, line_ref, corner, _along(into_v, 1.0, into_w), _over(normal,
+                                                                                                             length)):
                     continue
                 # or in a solid whose edge or corner is at the corner (two boxes stacked corner to corner beside
                 # a third box that reaches past both): the lines enter it at one edge and leave it at the other
-                if _angle_in_solid(g_, line, scratch, group_v, into_v, into_w):
+                if _angle_in_solid(geometry_ref, line_ref, scratch_ref, group_v, into_v, into_w):
                     continue
                 for k in range(ng):
                     if gk[k] != GEN_EDGE or \
-                            abs(_dot(_edge_direction(vertices, edges, gid[k], -1), normal)) <= g_.angle_tol * length:
+                            abs(_dot(_edge_direction(edge_unit, edges, gid[k], -1), normal)) <= g_.angle_tol * length:
                         continue
                     if n_inc + 1 > incidences.node.shape[0]:
                         return -1
@@ -1823,15 +1873,17 @@ def _pencils_at_shared_corner(geometry, corner_vertex, line, retained, scratch, 
                     r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
                     r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_w, group_v, w
-                    n_inc = _relaxed_arc(geometry, line, retained, 3, 1, into_v, 1.0, scratch, incidences, n_inc, node)
+                    n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 1, into_v, 1.0, scratch_ref,
+                                         incidences_ref, n_inc, node)  # fmt: skip
                     r_pin[1] = -1
                     r_pin[2] = -1
     return n_inc
 
 
 @njit_leaf
-def _on_line_around(vertices, edges, line, e, tau_v, tol):
+def _on_line_around(vertices, edges, line_ref, e, tau_v, tol):
     """Whether edge e lies on the line (both ends within tol) with the point at tau_v strictly inside it."""
+    line = dereferenced(line_ref)
     tau_a = _dot(_minus(_row(vertices, edges[e, 0]), line.start), line.u)
     tau_b = _dot(_minus(_row(vertices, edges[e, 1]), line.start), line.u)
     if not min(tau_a, tau_b) + tol < tau_v < max(tau_a, tau_b) - tol:
@@ -1845,23 +1897,25 @@ def _on_line_around(vertices, edges, line, e, tau_v, tol):
 
 
 @njit_leaf
-def _slides_along_edge_through(geometry, line, edge_mask, v, tau_v):
+def _slides_along_edge_through(geometry_ref, line_ref, edge_mask, v, tau_v):
     """Whether a face the line slides over has a masked edge, not at vertex v, lying on the line around v's
     point (tau_v): the only lines _pencils_to_vertex_on_edge has work on."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
     edges, offsets, corner_edge = geometry.edges, geometry.offsets, geometry.corner_edge
     for k in range(line.n_sliding):
         poly = line.sl_poly[k]
         for c in range(offsets[poly], offsets[poly + 1]):
             e = corner_edge[c]
             if edge_mask[e] and edges[e, 0] != v and edges[e, 1] != v and \
-                    _on_line_around(geometry.vertices, edges, line, e, tau_v, geometry.tol):  # fmt: skip
+                    _on_line_around(geometry.vertices, edges, line_ref, e, tau_v, geometry.tol):  # fmt: skip
                 return True
     return False
 
 
 @njit_leaf
-def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
-                               v, tau_v, group_v):  # fmt: skip
+def _pencils_to_vertex_on_edge(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node,
+                               edge_mask, ve_off, ve_edge, v, tau_v, group_v):  # fmt: skip
     """The pencil arcs ending where the line runs along another object's edge e through vertex generator v (at
     tau_v, group group_v) lying inside e (a box's top corner on the top edge of a box of the same height beside
     it). An edge f crossing e on the line (the bottom edge of a box stacked on the other) holds the pencil of
@@ -1870,8 +1924,13 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
     meets e along its length, no VEE candidate, so its nodes (two vertices on it) end the pencil: relaxing v,
     the contact moves into e_v while the lines keep the crossing. Returns the next free row, or -1 when the
     rows run out (see _validate_from)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    incidences = dereferenced(incidences_ref)
     g_ = geometry
-    vertices, edges, offsets, corner_edge = g_.vertices, g_.edges, g_.offsets, g_.corner_edge
+    vertices, edges, edge_unit = g_.vertices, g_.edges, g_.edge_unit
+    offsets, corner_edge = g_.offsets, g_.corner_edge
     tol = g_.tol
     for k in range(line.n_sliding):
         poly = line.sl_poly[k]
@@ -1879,7 +1938,7 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
             e = corner_edge[offsets[poly] + side]
             if not edge_mask[e] or edges[e, 0] == v or edges[e, 1] == v:
                 continue
-            if not _on_line_around(vertices, edges, line, e, tau_v, tol):
+            if not _on_line_around(vertices, edges, line_ref, e, tau_v, tol):
                 continue
             tau_a = _dot(_minus(_row(vertices, edges[e, 0]), line.start), line.u)
             tau_b = _dot(_minus(_row(vertices, edges[e, 1]), line.start), line.u)
@@ -1891,7 +1950,7 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                     repeated = repeated or corner_edge[c] == e
             if repeated:
                 continue
-            along = _edge_direction(vertices, edges, e, -1)
+            along = _edge_direction(edge_unit, edges, e, -1)
             for g in range(line.n_groups):
                 if g == group_v or not min(tau_a, tau_b) + tol < line.g_tau[g] < max(tau_a, tau_b) - tol:
                     continue
@@ -1900,15 +1959,15 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                         continue
                     f = corner_edge[offsets[line.c_poly[i]] + line.c_local[i]]
                     if not edge_mask[f] or edges[f, 0] == v or edges[f, 1] == v or \
-                            _parallel_edges(vertices, edges, e, f, tol) or \
-                            _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, f):  # fmt: skip
+                            _parallel_edges(vertices, edge_unit, edges, e, f, tol) or \
+                            _met_before(line_ref, corner_edge, offsets, g, i, CONTACT_EDGE, f):  # fmt: skip
                         continue
-                    across = _edge_direction(vertices, edges, f, -1)
+                    across = _edge_direction(edge_unit, edges, f, -1)
                     for slot in range(ve_off[v], ve_off[v + 1]):
                         e_v = ve_edge[slot]
                         if not edge_mask[e_v]:
                             continue
-                        into = _edge_direction(vertices, edges, e_v, v)
+                        into = _edge_direction(edge_unit, edges, e_v, v)
                         normal = _cross(into, along)
                         length = np.sqrt(_dot(normal, normal))
                         if length <= g_.angle_tol or abs(_dot(across, normal)) <= g_.angle_tol * length:
@@ -1920,14 +1979,16 @@ def _pencils_to_vertex_on_edge(geometry, line, retained, scratch, incidences, n_
                         r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
                         r_kind[2], r_id[2], r_group[2] = GEN_EDGE, e, g
                         n_inc = _relaxed_arc(
-                            geometry, line, retained, 3, 1, into, 1.0, scratch, incidences, n_inc, node
+                            geometry_ref, line_ref, retained_ref, 3, 1, into, 1.0, scratch_ref, incidences_ref, n_inc,
+                            node
                         )
                         r_pin[1] = -1
     return n_inc
 
 
 @njit_leaf
-def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone):
+def _pencils_over_plane_edges(geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, gid, gg,
+                              lone):
     """The pencil arcs of an FXE node (generators gid in line order, groups gg, `lone` the third edge's index)
     named by another edge of the crossing's plane that its line crosses between the third edge and the crossing
     (the top edge of a box the line runs over to the crossing): relaxing the crossing, the contact on either
@@ -1935,12 +1996,16 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
     crossing edge, off the crossing, meets the same pencil with that edge among its generators, and names the
     arc so; the lines that go on to cross the other crossing edge are rejected at both (they graze it). Returns
     the next free row, or -1 when the rows run out (see _validate_from)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    incidences = dereferenced(incidences_ref)
     g_ = geometry
-    vertices, edges = g_.vertices, g_.edges
+    edges, edge_unit = g_.edges, g_.edge_unit
     first_pair = 1 if lone == 0 else 0
     second_pair = 3 - lone - first_pair
-    normal = _cross(_edge_direction(vertices, edges, gid[first_pair], -1),
-                    _edge_direction(vertices, edges, gid[second_pair], -1))  # fmt: skip
+    normal = _cross(_edge_direction(edge_unit, edges, gid[first_pair], -1),
+                    _edge_direction(edge_unit, edges, gid[second_pair], -1))  # fmt: skip
     normal_len = np.sqrt(_dot(normal, normal))
     lo_group = min(gg[lone], gg[first_pair])
     hi_group = max(gg[lone], gg[first_pair])
@@ -1949,10 +2014,10 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
             if line.c_kind[i] != CONTACT_EDGE:
                 continue
             e = g_.corner_edge[g_.offsets[line.c_poly[i]] + line.c_local[i]]
-            if abs(_dot(_edge_direction(vertices, edges, e, -1), normal)) > g_.angle_tol * normal_len:
+            if abs(_dot(_edge_direction(edge_unit, edges, e, -1), normal)) > g_.angle_tol * normal_len:
                 continue
             # once per edge: each of its faces gives a contact
-            if _met_before(line, g_.corner_edge, g_.offsets, g, i, CONTACT_EDGE, e):
+            if _met_before(line_ref, g_.corner_edge, g_.offsets, g, i, CONTACT_EDGE, e):
                 continue
             if n_inc + 4 > incidences.node.shape[0]:
                 return -1
@@ -1961,18 +2026,21 @@ def _pencils_over_plane_edges(geometry, line, retained, scratch, incidences, n_i
                 r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[lone], gg[lone]
                 r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
                 r_kind[2], r_id[2], r_group[2] = GEN_EDGE, gid[sliding], gg[sliding]
-                norm_dir = _edge_direction(vertices, edges, gid[sliding], -1)
+                norm_dir = _edge_direction(edge_unit, edges, gid[sliding], -1)
                 for sigma in (1.0, -1.0):
                     n_inc = _relaxed_arc(
-                        geometry, line, retained, 3, 2, norm_dir, sigma, scratch, incidences, n_inc, node
+                        geometry_ref, line_ref, retained_ref, 3, 2, norm_dir, sigma, scratch_ref, incidences_ref,
+                        n_inc, node
                     )
     return n_inc
 
 
 @njit_leaf
-def _sliding_faces_meet_in(geometry, line, point, direction, normal):
+def _sliding_faces_meet_in(geometry_ref, line_ref, point, direction, normal):
     """Whether two faces the line slides over, in the plane of unit `normal` and facing each other, both hold the
     points just off `point` along `direction` (in that plane): objects pressed together there."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
     g_ = geometry
     points, offsets, normals = g_.points, g_.offsets, g_.normals
     for k in range(line.n_sliding):
@@ -2007,9 +2075,10 @@ def _grown(incidences, n_inc, least):
 
 
 @njit_leaf
-def _without_arcs_in_plane(incidences, lo, hi, points, offsets, normals, vertices, edges, poly, tol):
+def _without_arcs_in_plane(incidences_ref, lo, hi, points, offsets, normals, vertices, edges, poly, tol):
     """Drop the incidence rows lo..hi whose generators all lie in the polygon's plane (an edge with both ends within
     tol of it); returns the new end of the rows."""
+    incidences = dereferenced(incidences_ref)
     normal = _row(normals, poly)
     offset = -_dot(normal, _row(points, offsets[poly]))
     n_vertices = vertices.shape[0]
@@ -2133,7 +2202,8 @@ def _pierced_between(
 
 
 @njit_leaf
-def _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local, lo, hi, tol, out):
+def _seam_edges(points, offsets, normals, vertices, edge_unit, edges, corner_edge, c_poly, c_kind, c_local, lo, hi,
+                tol, out):
     """How many scene edges contacts lo..hi-1 lie on, written to `out`, when all are edge contacts of one edge
     or of collinear edges of objects side by side (a seam: each edge bounds the arcs through it alike), but
     for faces met inside whose plane holds those edges (a box against a wall: its edge on the wall); else 0."""
@@ -2150,7 +2220,7 @@ def _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, 
                 seen = True
         if seen:
             continue
-        if count > 0 and not _parallel_edges(vertices, edges, out[0], e, tol):
+        if count > 0 and not _parallel_edges(vertices, edge_unit, edges, out[0], e, tol):
             return 0
         out[count] = e
         count += 1
@@ -2167,7 +2237,7 @@ def _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, 
 
 
 @njit_leaf
-def _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u, angle_tol):
+def _junction_line(edge_unit, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u, angle_tol):
     """Whether the line along u (unit) through generators gk, gid (groups gg, ng of them) is a T-junction's line:
     a vertex met inside an edge generator (a box's corner on the edge of a box beside or under it) and another
     edge generator elsewhere, the line lying in the plane of that edge and a masked edge of the vertex. The
@@ -2191,12 +2261,12 @@ def _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng,
             extra = k
     if extra < 0 or edges[gid[extra], 0] == gid[v] or edges[gid[extra], 1] == gid[v]:
         return False
-    along = _edge_direction(vertices, edges, gid[extra], -1)
+    along = _edge_direction(edge_unit, edges, gid[extra], -1)
     for slot in range(ve_off[gid[v]], ve_off[gid[v] + 1]):
         e_v = ve_edge[slot]
         if not edge_mask[e_v]:
             continue
-        normal = _cross(along, _edge_direction(vertices, edges, e_v, -1))
+        normal = _cross(along, _edge_direction(edge_unit, edges, e_v, -1))
         size = np.sqrt(_dot(normal, normal))
         if size > angle_tol and abs(_dot(normal, u)) <= angle_tol * size:
             return True
@@ -2204,8 +2274,9 @@ def _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng,
 
 
 @njit_leaf
-def _same_arc(incidences, a, b):
+def _same_arc(incidences_ref, a, b):
     """Whether incidence rows a and b have one key: arc kind, generators and end faces."""
+    incidences = dereferenced(incidences_ref)
     if incidences.kind[a] != incidences.kind[b]:
         return False
     for k in range(3):
@@ -2264,6 +2335,21 @@ def _validate_chunk(
         np.empty((bound, 2), dtype=np.int64), np.empty(bound), np.empty(bound, dtype=np.int8),
     )  # fmt: skip
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    vf_off = geometry.vf_off
+    ef_off = geometry.ef_off
+    max_faces = 0
+    for v in range(vf_off.shape[0] - 1):
+        max_faces = max(max_faces, vf_off[v + 1] - vf_off[v])
+    # the faces around a crossing of two edges (see _relaxed_arc) stand in for a vertex's
+    for e in range(ef_off.shape[0] - 1):
+        max_faces = max(max_faces, 2 * (ef_off[e + 1] - ef_off[e]))
+    # a line meets each polygon once, and a flat vertex of each generator adds a group: buffers that never fill.
+    # Grown in the loop they were new arrays every candidate carried, a reference count on each of them per candidate
+    capacity = geometry.offsets.shape[0] - 1 + 4
+    buffers = _line_buffers(capacity)
+    retained = (np.zeros(3, dtype=np.int8), np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64),
+                np.full(3, -1, dtype=np.int64))  # fmt: skip
+    scratch = _new_scratch(capacity + max_faces)
     nodes = (node_cand, node_kind, node_gkind, node_gid, node_start, node_dir, node_reach, node_end)
     c = 0
     n_nodes = 0
@@ -2271,7 +2357,8 @@ def _validate_chunk(
     while c < n_cand:
         c, n_nodes, n_inc, wanted = _validate_from(
             c, n_nodes, n_inc, geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
-            cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, nodes, incidences, counters,
+            cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, nodes, incidences, buffers, retained,
+            scratch, counters,
         )  # fmt: skip
         if c < n_cand:
             incidences = _grown(incidences, n_inc, wanted)
@@ -2286,7 +2373,8 @@ def _validate_chunk(
 @njit(cache=True)
 def _validate_from(
     c_from, n_nodes, n_inc, geometry, plane_offsets, corner_vertex, bvh_arrays, ve_off, ve_edge, edge_mask,
-    cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, nodes, incidences, counters,
+    cand_vertices, cand_edges, cand_origin, cand_direction, lo, hi, nodes, incidences, buffers, retained, scratch,
+    counters,
 ):  # fmt: skip
     """Validate candidates c_from... (see _validate_chunk) into the node rows from n_nodes and the incidence rows
     from n_inc, until every candidate is done or a candidate needs more incidence rows than there are. Returns
@@ -2295,28 +2383,19 @@ def _validate_from(
     when all are done.
 
     The incidences are never replaced here: an array variable replaced in the loop (a grown buffer) is one the
-    loop carries from candidate to candidate, at a reference count per array per candidate."""
-    (points, offsets, normals, areas, vertices, edges, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+    loop carries from candidate to candidate, at a reference count per array per candidate. buffers (the line's
+    contact and group arrays, _line_buffers), retained ((3,) arrays r_kind int8, r_id, r_group, r_pin int64) and
+    scratch (_Scratch) are work arrays the caller keeps for all calls."""
+    (points, offsets, normals, areas, vertices, edges, edge_unit, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
      corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
      angle_tol) = geometry  # fmt: skip
     node_min, node_max, node_child, node_first, node_count, order, box_min, box_max = bvh_arrays
     node_cand, node_kind, node_gkind, node_gid, node_start, node_dir, node_reach, node_end = nodes
     n_cand = cand_vertices.shape[0]
-    n_vertices = vertices.shape[0]
     rows = incidences.node.shape[0]
-    # a line meets each polygon once, and a flat vertex of each generator adds a group: buffers that never fill.
-    # Grown in the loop they were new arrays every candidate carried, a reference count on each of them per candidate
-    capacity = offsets.shape[0] - 1 + 4
-    c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = _line_buffers(capacity)
-    extras = np.empty(capacity, dtype=np.int64)
+    c_poly, c_t, c_kind, c_local, g_lo, g_hi, g_tau, sl_poly, sl_a, sl_b = buffers
+    extras = np.empty(c_poly.shape[0], dtype=np.int64)
     stack = np.empty(STACK_SIZE, dtype=np.int64)
-    max_faces = 0
-    for v in range(n_vertices):
-        max_faces = max(max_faces, vf_off[v + 1] - vf_off[v])
-    # the faces around a crossing of two edges (see _relaxed_arc) stand in for a vertex's
-    for e in range(edges.shape[0]):
-        max_faces = max(max_faces, 2 * (ef_off[e + 1] - ef_off[e]))
-    scratch = _new_scratch(capacity + max_faces)
     arc_start = scratch.arc_start
     arc_len = scratch.arc_len
     bounds = scratch.bounds
@@ -2329,11 +2408,13 @@ def _validate_from(
     gid = np.zeros(4, dtype=np.int64)
     gg = np.zeros(4, dtype=np.int64)
     flat = np.zeros(4, dtype=np.bool_)
-    r_kind = np.zeros(3, dtype=np.int8)
-    r_id = np.zeros(3, dtype=np.int64)
-    r_group = np.zeros(3, dtype=np.int64)
-    r_pin = np.full(3, -1, dtype=np.int64)
-    retained = (r_kind, r_id, r_group, r_pin)
+    r_kind, r_id, r_group, r_pin = retained
+    # the named tuples the arc kernels share, handed to them by address (core.jit.by_reference): arguments, so
+    # their arrays outlive the addresses
+    geometry_ref = by_reference(geometry)
+    retained_ref = by_reference(retained)
+    scratch_ref = by_reference(scratch)
+    incidences_ref = by_reference(incidences)
 
     for c in range(c_from, n_cand):
         nodes_before = n_nodes
@@ -2487,7 +2568,7 @@ def _validate_from(
             for k in range(j + 1, ng):
                 if gg[j] == gg[k] and not (gk[j] == GEN_EDGE and gk[k] == GEN_EDGE):
                     coincident = True
-        junction = coincident and _junction_line(vertices, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u,
+        junction = coincident and _junction_line(edge_unit, edges, ve_off, ve_edge, edge_mask, gk, gid, gg, ng, u,
                                                  angle_tol)  # fmt: skip
         if coincident and not junction:
             counters[REJECT_COINCIDENT] += 1
@@ -2571,6 +2652,7 @@ def _validate_from(
         f1, f2 = _perpendicular_frame(u)
         line = _Line(c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u,
                      f1, f2)  # fmt: skip
+        line_ref = by_reference(line)
 
         # a vertex generator lying on another element's edge (a box's corner on the room's floor edge, on the
         # top edge of the box it stands on, on the collinear edge of a box beside it): the arcs along that edge
@@ -2585,14 +2667,15 @@ def _validate_from(
                     continue
                 extra = corner_edge[offsets[c_poly[i]] + c_local[i]]
                 if not edge_mask[extra] or edges[extra, 0] == gid[j] or edges[extra, 1] == gid[j] or \
-                        _met_before(line, corner_edge, offsets, g, i, CONTACT_EDGE, extra):  # fmt: skip
+                        _met_before(line_ref, corner_edge, offsets, g, i, CONTACT_EDGE, extra):  # fmt: skip
                     continue
                 # the relaxed arcs and the junction's pencils (an edge of the vertex by a pivot edge)
                 need = 2 + 3 * (ve_off[gid[j] + 1] - ve_off[gid[j]])
                 if n_inc + need > rows:
                     return c, nodes_before, rows_before, n_inc + need
                 n_inc = _vertex_replaced_by_edge(
-                    geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, j, extra,
+                    geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask, ve_off,
+                    ve_edge, j, extra,
                     gk, gid, gg, ng,
                 )  # fmt: skip
         # the other swaths through a junction's line (the lines through its vertex meeting the other edge) pass
@@ -2600,10 +2683,10 @@ def _validate_from(
         # (_pencils_at_shared_corner) do: the nodes through either vertex are this line
         if junction:
             for j in range(ng):
-                if gk[j] == GEN_VERTEX and _other_corner_at(line, corner_vertex, offsets, gid[j], gg[j]):
+                if gk[j] == GEN_VERTEX and _other_corner_at(line_ref, corner_vertex, offsets, gid[j], gg[j]):
                     n_inc = _pencils_at_shared_corner(
-                        geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
-                        ve_edge, gid[j], gg[j], gk, gid, gg, ng,
+                        geometry_ref, corner_vertex, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node,
+                        edge_mask, ve_off, ve_edge, gid[j], gg[j], gk, gid, gg, ng,
                     )  # fmt: skip
                     if n_inc < 0:
                         return c, nodes_before, rows_before, 2 * rows
@@ -2626,25 +2709,25 @@ def _validate_from(
                 across = _minus(offset, _scaled(u, tau_w))
                 if _dot(across, across) <= tol * tol:
                     n_inc = _arcs_off_edge(
-                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, v, e_v,
-                        g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
+                        geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask, v,
+                        e_v, g_tau[gg[j]], gg[j], tau_w, gk, gid, ng,
                     )  # fmt: skip
                     if n_inc < 0:
                         return c, nodes_before, rows_before, 2 * rows
             # a quick test first: another vertex is met at v's point at few corners
-            if _other_corner_at(line, corner_vertex, offsets, v, gg[j]):
+            if _other_corner_at(line_ref, corner_vertex, offsets, v, gg[j]):
                 n_inc = _pencils_at_shared_corner(
-                    geometry, corner_vertex, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off,
-                    ve_edge, v, gg[j], gk, gid, gg, ng,
+                    geometry_ref, corner_vertex, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node,
+                    edge_mask, ve_off, ve_edge, v, gg[j], gk, gid, gg, ng,
                 )  # fmt: skip
                 if n_inc < 0:
                     return c, nodes_before, rows_before, 2 * rows
             # lines sliding over a face (along the floor) are many, edges of it around v's point few: a quick test
             # first
-            if n_sliding > 0 and _slides_along_edge_through(geometry, line, edge_mask, v, g_tau[gg[j]]):
+            if n_sliding > 0 and _slides_along_edge_through(geometry_ref, line_ref, edge_mask, v, g_tau[gg[j]]):
                 n_inc = _pencils_to_vertex_on_edge(
-                    geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, v,
-                    g_tau[gg[j]], gg[j],
+                    geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask, ve_off,
+                    ve_edge, v, g_tau[gg[j]], gg[j],
                 )  # fmt: skip
                 if n_inc < 0:
                     return c, nodes_before, rows_before, 2 * rows
@@ -2659,8 +2742,8 @@ def _validate_from(
                 break
             g = first - 1 if side == 0 else last + 1
             while 0 <= g < n_groups:
-                n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
-                                      g_lo[g], g_hi[g], tol, extras)  # fmt: skip
+                n_extra = _seam_edges(points, offsets, normals, vertices, edge_unit, edges, corner_edge, c_poly,
+                                      c_kind, c_local, g_lo[g], g_hi[g], tol, extras)  # fmt: skip
                 # the edge lies on a face the line ends on (a box's edge against the wall)
                 on_face = False
                 if n_extra > 0:
@@ -2690,25 +2773,26 @@ def _validate_from(
                             if r_kind[n_retained] == GEN_EDGE and (norm < 0 or r_id[n_retained] < r_id[norm]):
                                 norm = n_retained
                             n_retained += 1
-                        norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                        norm_dir = _edge_direction(edge_unit, edges, r_id[norm], -1)
                         first_row = n_inc
                         for sigma in (1.0, -1.0):
                             n_inc = _relaxed_arc(
-                                geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc,
-                                node,
+                                geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, sigma, scratch_ref,
+                                incidences_ref, n_inc, node,
                             )  # fmt: skip
                         # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
                         # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
                         # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
                         # corner (a rug's, lines along the floor): the lines slide over that polygon either way
                         if (on_face or flat[j]) and n_inc == first_row + 2 and \
-                                _same_arc(incidences, first_row, first_row + 1):  # fmt: skip
+                                _same_arc(incidences_ref, first_row, first_row + 1):  # fmt: skip
                             n_inc = first_row
                     # two vertices and the edge: the EEE swaths through that edge and an edge of each vertex end here as
                     # well (the contact on either edge reaches its vertex at once)
                     if ng == 2:
                         n_inc = _swaths_leaving_both_vertices(
-                            geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                            geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask,
+                            ve_off, ve_edge, gid,
                             gg, extra, g,
                         )  # fmt: skip
                 if _group_blocked(
@@ -2721,8 +2805,8 @@ def _validate_from(
         # corner, the top edge of a box and the corner of a box floating beyond, aligned)
         if ng == 2:
             for g in range(first + 1, last):
-                n_extra = _seam_edges(points, offsets, normals, vertices, edges, corner_edge, c_poly, c_kind, c_local,
-                                      g_lo[g], g_hi[g], tol, extras)  # fmt: skip
+                n_extra = _seam_edges(points, offsets, normals, vertices, edge_unit, edges, corner_edge, c_poly,
+                                      c_kind, c_local, g_lo[g], g_hi[g], tol, extras)  # fmt: skip
                 for x in range(n_extra):
                     if not edge_mask[extras[x]]:
                         continue
@@ -2730,7 +2814,8 @@ def _validate_from(
                     if n_inc + need > rows:
                         return c, nodes_before, rows_before, n_inc + need
                     n_inc = _swaths_leaving_both_vertices(
-                        geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge, gid,
+                        geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask,
+                        ve_off, ve_edge, gid,
                         gg, extras[x], g,
                     )  # fmt: skip
                 # or a third corner grazed there (a box's corner on a seam, a box's top corner and the room's
@@ -2739,10 +2824,10 @@ def _validate_from(
                     if c_kind[i] != CONTACT_VERTEX:
                         continue
                     corner = corner_vertex[offsets[c_poly[i]] + c_local[i]]
-                    if not _met_before(line, corner_vertex, offsets, g, i, CONTACT_VERTEX, corner):
+                    if not _met_before(line_ref, corner_vertex, offsets, g, i, CONTACT_VERTEX, corner):
                         n_inc = _swaths_leaving_three_corners(
-                            geometry, line, retained, scratch, incidences, n_inc, node, edge_mask, ve_off, ve_edge,
-                            gid, gg, corner, g,
+                            geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask,
+                            ve_off, ve_edge, gid, gg, corner, g,
                         )  # fmt: skip
                         if n_inc < 0:
                             return c, nodes_before, rows_before, 2 * rows
@@ -2755,22 +2840,24 @@ def _validate_from(
                 r_kind[k] = GEN_EDGE
                 r_id[k] = gid[k]
                 r_group[k] = gg[k]
-            norm_dir = _edge_direction(vertices, edges, gid[lone], -1)
+            norm_dir = _edge_direction(edge_unit, edges, gid[lone], -1)
             for sigma in (1.0, -1.0):
                 n_inc = _relaxed_arc(
-                    geometry, line, retained, 3, lone, norm_dir, sigma, scratch, incidences, n_inc, node
+                    geometry_ref, line_ref, retained_ref, 3, lone, norm_dir, sigma, scratch_ref, incidences_ref,
+                    n_inc, node
                 )
             # and the pencil of the plane about the third edge's point, its contacts sliding off the crossing
             pair_low = 1 if lone == 0 else 0
             if gid[3 - lone - pair_low] < gid[pair_low]:
                 pair_low = 3 - lone - pair_low
-            norm_dir = _edge_direction(vertices, edges, gid[pair_low], -1)
+            norm_dir = _edge_direction(edge_unit, edges, gid[pair_low], -1)
             for sigma in (1.0, -1.0):
                 n_inc = _relaxed_arc(
-                    geometry, line, retained, 3, pair_low, norm_dir, sigma, scratch, incidences, n_inc, node
+                    geometry_ref, line_ref, retained_ref, 3, pair_low, norm_dir, sigma, scratch_ref, incidences_ref,
+                    n_inc, node
                 )
             n_inc = _pencils_over_plane_edges(
-                geometry, line, retained, scratch, incidences, n_inc, node, gid, gg, lone
+                geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, gid, gg, lone
             )
             if n_inc < 0:
                 return c, nodes_before, rows_before, 2 * rows
@@ -2791,10 +2878,11 @@ def _validate_from(
                     n_retained += 1
                 if norm < 0:
                     continue
-                norm_dir = _edge_direction(vertices, edges, r_id[norm], -1)
+                norm_dir = _edge_direction(edge_unit, edges, r_id[norm], -1)
                 for sigma in (1.0, -1.0):
                     n_inc = _relaxed_arc(
-                        geometry, line, retained, n_retained, norm, norm_dir, sigma, scratch, incidences, n_inc, node
+                        geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, sigma, scratch_ref,
+                        incidences_ref, n_inc, node
                     )
             else:
                 v = gid[j]
@@ -2817,17 +2905,18 @@ def _validate_from(
                         if k == j:
                             norm = n_retained
                         n_retained += 1
-                    norm_dir = _edge_direction(vertices, edges, e, v)
+                    norm_dir = _edge_direction(edge_unit, edges, e, v)
                     n_inc = _relaxed_arc(
-                        geometry, line, retained, n_retained, norm, norm_dir, 1.0, scratch, incidences, n_inc, node
+                        geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, 1.0, scratch_ref,
+                        incidences_ref, n_inc, node
                     )
         # at a flat polygon's corner, the arcs whose lines all lie in its plane slide over the polygon: it is no
         # event of theirs, and the lines through its other corners do not end them
         for j in range(ng):
             if flat[j]:
                 n_inc = _without_arcs_in_plane(
-                    incidences, node_rows, n_inc, points, offsets, normals, vertices, edges, vf_face[vf_off[gid[j]]],
-                    tol,
+                    incidences_ref, node_rows, n_inc, points, offsets, normals, vertices, edges,
+                    vf_face[vf_off[gid[j]]], tol,
                 )  # fmt: skip
                 break
     return n_cand, n_nodes, n_inc, 0
@@ -3007,11 +3096,11 @@ def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 
     in a region of several."""
     geometry = _Geometry(
         scene.polygon_points, scene.polygon_offsets, scene.normals, scene.areas, scene.vertices, scene.edges,
-        topology.vertex_face_offsets, topology.vertex_faces, topology.vertex_face_corner, scene.edge_face_offsets,
+        _edge_units(scene.vertices, scene.edges), topology.vertex_face_offsets, topology.vertex_faces,
+        topology.vertex_face_corner, scene.edge_face_offsets,
         scene.edge_faces, topology.edge_face_local, scene.polygon_edge_ids, topology.face_group,
         np.ascontiguousarray(scene.object_ids, dtype=np.int64), element_solid, face_region, split_edge,
-        float(scene.diagonal),
-        float(scene.tol.length),
+        float(scene.diagonal), float(scene.tol.length),
         float(scene.tol.cosine),
     )  # fmt: skip
     grown = scene.diagonal
