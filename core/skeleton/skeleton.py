@@ -215,8 +215,18 @@ class Skeleton:
         # stage waits for the other's slowest slice to end. A validated chunk is committed as soon as it is
         # done, and this loop waits for one only when _CHUNKS_IN_FLIGHT are queued: enumeration, which
         # produces no more than its few pending work units while nobody takes them, goes on meanwhile
+        in_flight: deque = deque()
+
+        def committed(ready):
+            """Commit and report the oldest chunks while ready(); the cancel request is honoured after each
+            chunk reported, not only between enumerated chunks."""
+            while in_flight and ready():
+                done, done_fraction = in_flight.popleft()
+                commit(done)
+                yield done_fraction
+                check_cancel()
+
         with ThreadPoolExecutor(1) as pool:
-            in_flight: deque = deque()
             try:
                 for candidates, fraction in iter_candidates(
                     self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
@@ -225,17 +235,8 @@ class Skeleton:
                     check_cancel()
                     in_flight.append((pool.submit(validated, candidates), fraction))
                     del candidates
-                    # the request is honoured after each chunk reported, not only between enumerated chunks
-                    while in_flight and (in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT):
-                        done, done_fraction = in_flight.popleft()
-                        commit(done)
-                        yield done_fraction
-                        check_cancel()
-                while in_flight:
-                    done, done_fraction = in_flight.popleft()
-                    commit(done)
-                    yield done_fraction
-                    check_cancel()
+                    yield from committed(lambda: in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT)
+                yield from committed(lambda: True)
             except BaseException:
                 # cancelled, failed or closed: the queued chunks are dropped, only the one being validated is
                 # waited for
