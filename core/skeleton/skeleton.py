@@ -194,12 +194,15 @@ class Skeleton:
                 face_region=face_region,
             )
 
-        def commit(validation) -> None:
+        def commit(validation, last: bool) -> None:
             nonlocal n_nodes
             nodes, incidences, counters = validation.result()
             # merged here, on this thread, while the validation thread goes on with the next chunk: that thread's
-            # one serial step would leave a core idle at the end of every chunk
-            nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)
+            # one serial step would leave a core idle at the end of every chunk. The last chunk of a complete
+            # build is not: _finish merges every node on one line and counts a repeated incidence once anyway,
+            # and nothing runs beside this step then
+            if not (last and wanted is None):
+                nodes, incidences = _merged_within(self.scene, nodes, incidences, edge_tol)
             rejected[:] += counters
             node_parts.append(nodes)
             incidence_parts.append(
@@ -217,12 +220,12 @@ class Skeleton:
         # produces no more than its few pending work units while nobody takes them, goes on meanwhile
         in_flight: deque = deque()
 
-        def committed(ready):
+        def committed(ready, enumerated: bool = False):
             """Commit and report the oldest chunks while ready(); the cancel request is honoured after each
-            chunk reported, not only between enumerated chunks."""
+            chunk reported, not only between enumerated chunks. enumerated: no chunk comes after these."""
             while in_flight and ready():
                 done, done_fraction = in_flight.popleft()
-                commit(done)
+                commit(done, enumerated and not in_flight)
                 yield done_fraction
                 check_cancel()
 
@@ -236,7 +239,7 @@ class Skeleton:
                     in_flight.append((pool.submit(validated, candidates), fraction))
                     del candidates
                     yield from committed(lambda: in_flight[0][0].done() or len(in_flight) > _CHUNKS_IN_FLIGHT)
-                yield from committed(lambda: True)
+                yield from committed(lambda: True, enumerated=True)
             except BaseException:
                 # cancelled, failed or closed: the queued chunks are dropped, only the one being validated is
                 # waited for
