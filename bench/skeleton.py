@@ -7,16 +7,17 @@ Per office size (84 ... 1488 polygons, the sizes of Table 1), built --repeats ti
 (time on a 195 MHz R10000, memory, thousands of nodes and arcs) with our speed-up; the median build's CPU seconds
 (all threads) and its CPU microseconds per node, beside what the 30x target leaves per node on this machine's cores
 (Table 1's time over 30, times the cores, over our nodes): where the target is missed, how much cheaper a node must
-get; and how many times one thread's work the cores do at once (a register-only numba loop alone, then on every
-core), measured after the builds: the core count on a quiet machine, less when another job shared the cores during
-the run (or vCPUs share a physical core), which makes the run's times too slow to compare with others. Then the
-growth exponent of time against polygons (least squares on log-log; the paper: n^2.4), the lazy build from one
-source (the first light) against the full build on the largest size (paper, 1488 polygons: 4 min 15 s against 31 min
-59 s), and on that skeleton the query costs: form_factor and visible_boundary per vertex view, discontinuities and
-blockers per (light, receiver) pair (paper: 1.2-1.5 ms per view, 1.3-28.6 ms per discontinuity mesh, 4 ms for a
-blocker list), interactions per polygon (the paper gives no time). Targets of issue 3: at least 30x faster than
-Table 1 at every size, at most 416 MB at 1488 polygons, the one-source lazy build at least 5x faster than the full
-build there.
+get; the seconds of the index vertex views read (skel.index_views(), made by the first view otherwise; its bytes
+count in the skeleton's); and how many times one thread's work the cores do at once (a register-only numba loop
+alone, then on every core), measured after the builds: the core count on a quiet machine, less when another job
+shared the cores during the run (or vCPUs share a physical core), which makes the run's times too slow to compare
+with others. Then the growth exponent of time against polygons (least squares on log-log; the paper: n^2.4), the
+lazy build from one source (the first light) against the full build on the largest size (paper, 1488 polygons: 4 min
+15 s against 31 min 59 s), and on that skeleton the query costs: form_factor and visible_boundary per vertex view,
+discontinuities and blockers per (light, receiver) pair (paper: 1.2-1.5 ms per view, 1.3-28.6 ms per discontinuity
+mesh, 4 ms for a blocker list), interactions per polygon (the paper gives no time). Targets of issue 3: at least 30x
+faster than Table 1 at every size, at most 416 MB at 1488 polygons, the one-source lazy build at least 5x faster
+than the full build there.
 
     python -m bench skeleton [--sizes 84,168,...] [--quick] [--repeats 3] [--views N] [--pairs N]
                              [--interactions N] [--seed S] [--progress]
@@ -185,6 +186,9 @@ def construction(build_skeleton, sizes, show_progress: bool, repeats: int = 1):
         cpu_seconds = float(np.median([b[3] for b in builds]))
         peak = max(b[1] for b in builds)
         above = max(b[1] - b[2] for b in builds)
+        # what vertex views read is made by the first view, not by the build: timed apart, and in the bytes
+        with Stopwatch() as indexing:
+            skeleton.index_views()
         stats = skeleton.stats
         paper_seconds, paper_mb, paper_nodes, paper_arcs = PAPER_TABLE_1[n]
         nodes, arcs = _counts(stats, "nodes"), _counts(stats, "arcs")
@@ -209,6 +213,7 @@ def construction(build_skeleton, sizes, show_progress: bool, repeats: int = 1):
                 "paper_nodes_k": paper_nodes,
                 "paper_arcs_k": paper_arcs,
                 "speed_up": paper_seconds / seconds,
+                "views_seconds": indexing.seconds,
                 "cpu_seconds": cpu_seconds,
                 "cpu_us_per_node": 1e6 * cpu_seconds / max(1, sum(nodes.values())),
                 "target_cpu_us_per_node": 1e6 * paper_seconds / SPEED_UP_TARGET * CORES / max(1, sum(nodes.values())),
@@ -536,7 +541,7 @@ def main(argv) -> int:
     )
     print()
     print_table(table, ["polygons", "builds", "seconds", "seconds_min", "seconds_max", "cpu_seconds", "nodes_total",
-                        "cpu_us_per_node", "target_cpu_us_per_node", "speed_up"],
+                        "cpu_us_per_node", "target_cpu_us_per_node", "speed_up", "views_seconds"],
                 title=f"CPU per node, and what {SPEED_UP_TARGET:.0f}x Table 1 leaves per node on {CORES} cores "
                       f"(seconds: the median build)")
     throughput = cores_throughput()

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -141,6 +142,7 @@ class Skeleton:
             self.topology.vertex_face_offsets, self.topology.vertex_faces, scene.tol.length,
         )  # fmt: skip
         self.sources: np.ndarray | None = np.empty(0, dtype=np.int64)
+        self._views_lock = threading.Lock()
         self._node_parts: list[NodeChunk] = []
         self._incidence_parts: list[IncidenceChunk] = []
         self._n_nodes = 0
@@ -266,7 +268,7 @@ class Skeleton:
     def _finish(self) -> None:
         scene = self.scene
         # the previous graph and its indexes go before the new ones are made
-        self.nodes = self.arcs = self._vertex_arcs = self._arc_free = self._probes = None
+        self.nodes = self.arcs = self._vertex_arcs = self._views = None
         self._pair_first = self._pair_second = self._pair_offsets = self._pair_arcs = None
         nodes = _concatenated(NodeChunk, self._node_parts)
         _return_free_memory()
@@ -309,23 +311,13 @@ class Skeleton:
         self._vertex_arcs = ev[order].astype(np.int32)
         self._vertex_offsets = np.zeros(n_vertices + 1, dtype=np.int64)
         self._vertex_offsets[1:] = np.cumsum(np.bincount(ev_vertex, minlength=n_vertices))
-        # the indexes below are the largest arrays of a build: what each step leaves goes before the next
+        # the pair index is the largest array of a build: what this step leaves goes before it
         del ev, ev_vertex, order
         _return_free_memory()
         self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs = _pair_index(
             arcs.kind, arcs.codes, arcs.ends, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
             scene.edge_face_offsets, scene.edge_faces, topo.face_group, topo.n_groups, WORKERS,
         )  # fmt: skip
-        _return_free_memory()
-        self._arc_free = _arcs_leave_freely(
-            arcs.kind, arcs.codes, arcs.s, arcs.dangling, n_vertices, scene.vertices, scene.edges,
-            scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
-            topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces, self._other_offsets,
-            self._other_codes, scene.edge_face_offsets, scene.edge_faces, topo.edge_face_local, scene.tol.cosine,
-            WORKERS,
-        )  # fmt: skip
-        _return_free_memory()
-        self._probes = self._probe_arcs()
 
     # ------------------------------------------------------------------------------------------------------
     # statistics
@@ -350,9 +342,13 @@ class Skeleton:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by nodes, arcs, the indexes and, while partial, every node's line and the incidences."""
+        """Bytes held by nodes, arcs, the indexes (the vertex views' once a view was asked for) and, while partial,
+        every node's line and the incidences."""
         arrays = [*vars(self.nodes).values(), *vars(self.arcs).values()]
-        arrays += [self._vertex_arcs, self._vertex_offsets, self._arc_free, *vars(self._probes).values()]
+        arrays += [self._vertex_arcs, self._vertex_offsets]
+        if self._views is not None:
+            arc_free, probes = self._views
+            arrays += [arc_free, *vars(probes).values()]
         arrays += [self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs]
         if self.node_line is not None:
             arrays += [self.node_line, *vars(self._incidence_parts[0]).values()]
@@ -567,7 +563,7 @@ class Skeleton:
         # may end exactly on an edge (the concave edge of a room, where rounding finds neither wall), and an arc
         # with nodes inside it changes what its lines meet there (see _arc_cuts): those are read piece by piece
         # from their probes (see _probe_arcs)
-        probes = self._probes
+        arc_free, probes = self._view_index()
         first, last = probes.offsets[candidates], probes.offsets[candidates + 1]
         probed = (last - first > 1) | ((last > first) & ~bounds_source)
         # only the probed arcs with a piece seeing the source on one side bound its view
@@ -586,7 +582,7 @@ class Skeleton:
             candidates[related], edges[related], ends_on_source[related], probed[related], dangling[related],
             strict=True,
         ):
-            if not self._arc_free[arc]:
+            if not arc_free[arc]:
                 continue
             if by_probe:
                 seen = probes.seen[probes.offsets[arc] : probes.offsets[arc + 1]] == group
@@ -624,6 +620,29 @@ class Skeleton:
                 segments, scene.normals[rests], scene.plane_offsets[rests], 16.0 * scene.tol.length
             )
         return _chain(segments, vertex, source)
+
+    def index_views(self) -> Skeleton:
+        """Make now what vertex views (form_factor, visible_boundary) read, which the first view makes otherwise;
+        returns self."""
+        self._view_index()
+        return self
+
+    def _view_index(self) -> tuple[np.ndarray, Probes]:
+        """(arc_free (A,) bool: whether each arc's lines leave its vertex into free space, Probes): what vertex
+        views read (see _loops). Made by the first view after a build, not by the build: a bake reads
+        discontinuities and blockers only, and each build a bake extends would make them again."""
+        with self._views_lock:
+            if self._views is None:
+                scene, arcs, topo = self.scene, self.arcs, self.topology
+                arc_free = _arcs_leave_freely(
+                    arcs.kind, arcs.codes, arcs.s, arcs.dangling, scene.n_vertices, scene.vertices, scene.edges,
+                    scene.polygon_points, scene.polygon_offsets, scene.normals, topo.vertex_face_offsets,
+                    topo.vertex_faces, topo.vertex_face_corner, self._rest_offsets, self._rest_faces,
+                    self._other_offsets, self._other_codes, scene.edge_face_offsets, scene.edge_faces,
+                    topo.edge_face_local, scene.tol.cosine, WORKERS,
+                )  # fmt: skip
+                self._views = (arc_free, self._probe_arcs())
+            return self._views
 
     def _probe_arcs(self) -> Probes:
         """The probes of the EV arcs whose sides the faces along them do not tell: lines lying in a face's

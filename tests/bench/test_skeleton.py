@@ -17,6 +17,9 @@ NODES = {"VV": 600, "E4": 400}
 class _StubSkeleton:
     stats = {"nodes": NODES, "arcs": {"EV": 10}, "dangling_arcs": 0, "bytes": 1024, "seconds": 0.0}
 
+    def index_views(self):
+        return self
+
 
 def _busy(seconds: float) -> None:
     start = time.thread_time()

@@ -1164,17 +1164,16 @@ def test_nodes_merged_within_each_chunk_give_the_skeleton_merged_at_the_end(name
 def test_probes_cast_in_batches_are_those_cast_at_once(name, sides_at_once, monkeypatch):
     """The probed pieces' rays cast a hundred at a time, the two sides of each batch in turn or on two threads at
     once, see what they see cast all at once on one thread."""
-    whole = _skeleton(name)
-    assert len(whole._probes.s) > 3 * 100
-    assert len(whole._probes.s) < skeleton_module._PROBED_ON_ONE_THREAD
+    _, whole = _skeleton(name)._view_index()
+    assert len(whole.s) > 3 * 100
+    assert len(whole.s) < skeleton_module._PROBED_ON_ONE_THREAD
     monkeypatch.setattr(skeleton_module, "_PROBED_AT_ONCE", 100)
     if sides_at_once:
         monkeypatch.setattr(skeleton_module, "_PROBED_ON_ONE_THREAD", 0)
-    batched = build_skeleton(_scene(name))
+    _, batched = build_skeleton(_scene(name))._view_index()
     for field in ("offsets", "s", "node", "seen"):
-        expected = getattr(whole._probes, field)
-        np.testing.assert_array_equal(getattr(batched._probes, field), expected, err_msg=field)
-    assert (whole._probes.seen >= 0).any()
+        np.testing.assert_array_equal(getattr(batched, field), getattr(whole, field), err_msg=field)
+    assert (whole.seen >= 0).any()
 
 
 def test_incidences_sort_as_lexsort_does():
@@ -1324,7 +1323,32 @@ def test_lazy_builds_then_complete_give_the_full_skeleton(name):
         assert lazy.stats[key] == full.stats[key], key
     for lazy_values, full_values in zip(_sorted_arcs(lazy), _sorted_arcs(full), strict=True):
         np.testing.assert_array_equal(lazy_values, full_values)
+    lazy._view_index()
+    full._view_index()
     assert 0 < partial_bytes and lazy.nbytes == full.nbytes
+
+
+def test_views_of_a_skeleton_extended_by_queries_are_those_of_the_full_one():
+    """A build leaves the index of the vertex views to the first view; a view of a source not built yet extends
+    the skeleton (seed 003 section 5) and the next view indexes it again: the form factors of both sources at
+    every vertex are the full skeleton's."""
+    name = "generic room 0"
+    scene, full = _scene(name), _skeleton(name)
+    light, wall = int(scene.lights[0]), 0
+    vertices, receivers = _vertex_receivers(scene)
+    keep = ~_hidden_by_contact(scene, vertices, receivers)
+    pairs = list(zip(vertices[keep].tolist(), receivers[keep].tolist(), strict=True))
+    lazy = build_skeleton(scene, sources=[light])
+    assert lazy._views is None
+    from_light = [lazy.form_factor(v, light, r) for v, r in pairs]
+    first_index = lazy._views
+    assert first_index is not None
+    from_wall = [lazy.form_factor(v, wall, r) for v, r in pairs]
+    assert lazy.sources.tolist() == sorted([light, wall]) and lazy._views is not first_index
+    for source, values in ((light, from_light), (wall, from_wall)):
+        expected = [full.form_factor(v, source, r) for v, r in pairs]
+        assert sum(value > 1e-3 for value in expected) > len(pairs) // 4
+        np.testing.assert_allclose(values, expected, rtol=0.0, atol=1e-12)
 
 
 @pytest.mark.skipif(skeleton_module._resident_bytes() is None, reason="no /proc/self/statm to read")
