@@ -99,8 +99,8 @@ MAX_BINS = 8
 _CLIP = 40
 """Vertex capacity of the clipping buffers (a quad clipped by 9 planes has at most 13 vertices)."""
 
-_VERTEX_BATCH = 48
-_EDGE_BATCH = 24
+_VERTEX_BATCH = 24
+_EDGE_BATCH = 12
 _FACE_BATCH = 32
 
 Cancel = Callable[[], bool]
