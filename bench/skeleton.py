@@ -518,9 +518,9 @@ def main(argv) -> int:
         return 0
 
     started = time.perf_counter()
-    # the first build compiles the numba kernels (or loads them from numba's cache)
+    # the first build and view index compile the numba kernels (or load them from numba's cache)
     with Stopwatch() as warm_up:
-        build_skeleton(SCENES["cornell-box"]().build())
+        build_skeleton(SCENES["cornell-box"]().build()).index_views()
     if args.repeats < 1:
         print(f"--repeats must be at least 1, got {args.repeats}", file=sys.stderr)
         return 2
