@@ -259,6 +259,8 @@ def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, dire
     along a face of a convex corner would count as entering the solid)."""
     # sectors cost a frame and arc tangents, and most points have fewer than two faces with one: count first
     members = 0
+    first = -1
+    second = -1
     for i in range(lo, hi):
         if kinds[i] == CONTACT_INTERIOR:
             return True
@@ -266,8 +268,16 @@ def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, dire
             continue
         if abs(_dot(_row(normals, polys[i]), direction)) > angle_tol:
             members += 1
+            if first < 0:
+                first = i
+            else:
+                second = i
     if members < 2:
         return False
+    if members == 2 and kinds[first] == CONTACT_EDGE and kinds[second] == CONTACT_EDGE:
+        covered = _faces_along_one_edge_cover(points, offsets, normals, polys, locals_, first, second, direction)
+        if covered >= 0:
+            return covered == 1
     e1, e2 = _perpendicular_frame(direction)
     members = 0
     for i in range(lo, hi):
@@ -279,6 +289,32 @@ def _group_blocked(points, offsets, normals, polys, kinds, locals_, lo, hi, dire
             )
             members += 1
     return _arcs_cover_circle_with(arc_start, arc_len, members, angle_tol, bounds)
+
+
+@njit_leaf
+def _faces_along_one_edge_cover(points, offsets, normals, polys, locals_, first, second, direction):
+    """Whether the two faces touched along one edge (contacts `first` and `second` of polys, locals_: edge k of
+    each, with the same two end points), neither holding the line of this direction, close around it: 1 if so, 0
+    if not, -1 when the edges are not the same segment. Each face covers the half-plane around the line on the
+    side its inward direction n x e takes, and that side turns with the sign of n . direction (e x (n x e) is n
+    |e|^2): the half-planes are opposite, and cover every direction, when the faces run along the edge in
+    opposite senses and face the line alike, or in one sense and face it oppositely. The sectors of
+    _group_blocked decide the same by the same signs, at the cost of a frame and four angles."""
+    p = polys[first]
+    q = polys[second]
+    p_from = offsets[p] + locals_[first]
+    p_to = offsets[p] + (locals_[first] + 1) % (offsets[p + 1] - offsets[p])
+    q_from = offsets[q] + locals_[second]
+    q_to = offsets[q] + (locals_[second] + 1) % (offsets[q + 1] - offsets[q])
+    same = True
+    opposite = True
+    for k in range(3):
+        same = same and points[p_from, k] == points[q_from, k] and points[p_to, k] == points[q_to, k]
+        opposite = opposite and points[p_from, k] == points[q_to, k] and points[p_to, k] == points[q_from, k]
+    if same == opposite:
+        return -1
+    alike = (_dot(_row(normals, p), direction) > 0.0) == (_dot(_row(normals, q), direction) > 0.0)
+    return 1 if alike == opposite else 0
 
 
 @njit_leaf

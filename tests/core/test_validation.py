@@ -260,3 +260,68 @@ def test_flat_regions_join_coplanar_faces_of_different_objects_along_a_shared_si
     for a in range(n):
         for b in range(n):
             assert (region[a] == region[b]) == (root(a) == root(b))
+
+
+def _half_planes_cover(scene, faces, locals_, direction) -> bool:
+    """Whether the half-planes of the faces touched along their edges (face, local edge) cover every direction
+    around a line of this direction: sampled angles, those within a milliradian of an edge's projection left out."""
+    e1 = np.cross(direction, [1.0, 0.0, 0.0] if abs(direction[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(direction, e1)
+    sides = []
+    for face, local in zip(faces, locals_, strict=True):
+        loop = scene.polygon(int(face))
+        edge = loop[(local + 1) % len(loop)] - loop[local]
+        inward = np.cross(scene.normals[face], edge)
+        along = np.array([edge @ e1, edge @ e2])
+        across = np.array([inward @ e1, inward @ e2])
+        sides.append((along / np.linalg.norm(along), np.sign(along[0] * across[1] - along[1] * across[0])))
+    for angle in np.linspace(0.0, 2.0 * np.pi, 720, endpoint=False):
+        x = np.array([np.cos(angle), np.sin(angle)])
+        seen = [sign * (along[0] * x[1] - along[1] * x[0]) for along, sign in sides]
+        if min(abs(s) for s in seen) < 1e-3:
+            continue
+        if max(seen) < 0.0:
+            return False
+    return True
+
+
+def test_two_faces_along_one_edge_close_around_a_line_as_their_half_planes_do():
+    """_group_blocked decides two faces touched along one edge by the signs of their normals along the line
+    (_faces_along_one_edge_cover): for every edge of office-84 between two faces, random directions and
+    directions within 1e-9 and 1e-6 of a face's plane, the answer is that of the half-planes themselves."""
+    scene = BENCH_SCENES["office-84"]().build()
+    topology = scene_topology(scene)
+    rng = np.random.default_rng(5)
+    polys = np.empty(2, dtype=np.int64)
+    kinds = np.full(2, validation.CONTACT_EDGE, dtype=np.int8)
+    locals_ = np.empty(2, dtype=np.int64)
+    work = np.empty(4), np.empty(4), np.empty(8)
+    decided = {True: 0, False: 0}
+    for edge in range(len(scene.edges)):
+        lo, hi = scene.edge_face_offsets[edge], scene.edge_face_offsets[edge + 1]
+        if hi - lo != 2:
+            continue
+        polys[:] = scene.edge_faces[lo:hi]
+        locals_[:] = topology.edge_face_local[lo:hi]
+        directions = list(rng.normal(size=(6, 3)))
+        for face in polys:
+            normal = scene.normals[face]
+            flat = np.cross(normal, rng.normal(size=3))
+            for lean in (1e-9, -1e-9, 1e-6, -1e-6):
+                directions.append(flat / np.linalg.norm(flat) + lean * normal)
+        for direction in directions:
+            direction = direction / np.linalg.norm(direction)
+            if min(abs(scene.normals[polys] @ direction)) <= scene.tol.cosine:
+                continue
+            assert validation._faces_along_one_edge_cover(
+                scene.polygon_points, scene.polygon_offsets, scene.normals, polys, locals_, 0, 1, direction
+            ) >= 0
+            expected = _half_planes_cover(scene, polys, locals_, direction)
+            got = validation._group_blocked(
+                scene.polygon_points, scene.polygon_offsets, scene.normals, polys, kinds, locals_, 0, 2, direction,
+                scene.tol.cosine, *work,
+            )  # fmt: skip
+            assert got == expected, (edge, direction)
+            decided[expected] += 1
+    assert min(decided.values()) > 100
