@@ -10,7 +10,7 @@ prints the CPU seconds sampled in each function, largest first. The rest of the 
 waits) is one row. Needs `perf` (Debian: linux-perf) and permission to record this
 process (kernel.perf_event_paranoid <= 2 for a process of one's own).
 
-    python -m bench kernels [--scene office-312] [--stage build|enumeration|validation] [--top 25]
+    python -m bench kernels [--scene office-312] [--stage build|enumeration|validation] [--top 25] [--repeat 1]
 
 Stages: `build` is build_skeleton; `enumeration` consumes core.skeleton.enumeration.iter_candidates;
 `validation` validates every candidate of the scene on one thread (the candidates enumerated beforehand).
@@ -151,6 +151,8 @@ def main(argv) -> int:
     parser.add_argument("--scene", default="office-312", help="a scene of bench/scenes.py (default office-312)")
     parser.add_argument("--stage", choices=STAGES, default="build")
     parser.add_argument("--top", type=int, default=25, help="functions listed (the rest summed in one row)")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="runs of the stage recorded (a small scene's one run gives too few samples)")
     args = parser.parse_args(argv)
     if shutil.which("perf") is None or shutil.which("nm") is None:
         print("bench kernels needs Linux perf and nm on PATH (Debian: linux-perf, binutils)", file=sys.stderr)
@@ -179,7 +181,8 @@ def main(argv) -> int:
         # perf attaches to the running threads after it starts: give it a moment
         time.sleep(1.0)
         with Stopwatch() as timed:
-            run()
+            for _ in range(args.repeat):
+                run()
         recorder.send_signal(signal.SIGINT)
         _, errors = recorder.communicate()
         if recorder.returncode not in (0, -signal.SIGINT) or not os.path.exists(data):
@@ -197,10 +200,10 @@ def main(argv) -> int:
     samples = _samples_by_function(report.stdout, {symbol for _, _, symbol in functions})
     rows = _rows(samples, args.top)
     print_table(rows, ["function", "cpu_seconds", "share"],
-                title=f"CPU time by numba function: {args.stage} of {args.scene} ({timed.seconds:.2f} s wall, "
+                title=f"CPU time by numba function: {args.repeat} x {args.stage} of {args.scene} ({timed.seconds:.2f} s wall, "
                       f"sampled at {FREQUENCY} Hz per thread)")  # fmt: skip
     write_results(f"kernels-{args.scene}-{args.stage}", rows, scene=args.scene, stage=args.stage,
-                  wall_seconds=timed.seconds, warm_up_seconds=warm_up.seconds, frequency=FREQUENCY)  # fmt: skip
+                  repeat=args.repeat, wall_seconds=timed.seconds, warm_up_seconds=warm_up.seconds, frequency=FREQUENCY)  # fmt: skip
     return 0
 
 
