@@ -200,10 +200,11 @@ def main(argv) -> int:
     samples = _samples_by_function(report.stdout, {symbol for _, _, symbol in functions})
     rows = _rows(samples, args.top)
     print_table(rows, ["function", "cpu_seconds", "share"],
-                title=f"CPU time by numba function: {args.repeat} x {args.stage} of {args.scene} ({timed.seconds:.2f} s wall, "
-                      f"sampled at {FREQUENCY} Hz per thread)")  # fmt: skip
+                title=f"CPU time by numba function: {args.repeat} x {args.stage} of {args.scene} "
+                      f"({timed.seconds:.2f} s wall, sampled at {FREQUENCY} Hz per thread)")  # fmt: skip
     write_results(f"kernels-{args.scene}-{args.stage}", rows, scene=args.scene, stage=args.stage,
-                  repeat=args.repeat, wall_seconds=timed.seconds, warm_up_seconds=warm_up.seconds, frequency=FREQUENCY)  # fmt: skip
+                  repeat=args.repeat, wall_seconds=timed.seconds, warm_up_seconds=warm_up.seconds,
+                  frequency=FREQUENCY)  # fmt: skip
     return 0
 
 

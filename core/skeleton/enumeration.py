@@ -75,7 +75,7 @@ from ..jit import njit_leaf
 from ..raycast import CONTACT_VERTEX, _arcs_cover_circle_with, _contact_arc, _perpendicular_frame
 from ..scene import Scene
 from .candidates import CANDIDATE_E4, CANDIDATE_FEE, CANDIDATE_FXE, CANDIDATE_VEE, CANDIDATE_VV, NodeCandidates
-from .topology import scene_topology
+from .topology import Topology, scene_topology
 from .validation import WORKERS, _shared_face
 
 DEFAULT_CHUNK = 100_000
@@ -97,6 +97,9 @@ and 12 % at 1488 with 0.03 of the diagonal (the rule gives 0.036 and 0.031)."""
 MAX_BINS = 8
 
 _CLIP = 40
+
+_PIVOT_SLACK = 2.0
+"""How many tol lengths off its pivot edge an E4 root may fall before the line is turned away unchecked."""
 """Vertex capacity of the clipping buffers (a quad clipped by 9 planes has at most 13 vertices)."""
 
 _VERTEX_BATCH = 24
@@ -118,6 +121,7 @@ def iter_candidates(
     chunk: int = DEFAULT_CHUNK,
     cancel: Cancel | None = None,
     workers: int = WORKERS,
+    topology: Topology | None = None,
 ) -> Iterator[tuple[NodeCandidates, float]]:
     """Yield (candidates, fraction done) until every candidate line of the scene is proposed.
 
@@ -125,7 +129,8 @@ def iter_candidates(
     the edges that may (not flat). sources: None for every line, or polygon ids: only lines crossing one of
     them (within tol; seed 003 section 5). chunk: most candidates per yielded NodeCandidates (>= 1).
     cancel: a callable checked between chunks; CancelledError is raised when it returns True. workers: threads
-    running work units at once (the kernels release the GIL); the candidates do not depend on it.
+    running work units at once (the kernels release the GIL); the candidates do not depend on it. topology: the
+    scene's core.skeleton.topology.scene_topology when the caller has it (made here otherwise).
 
     Chunks are never empty; fractions increase strictly and the last one is 1.0. Each candidate appears
     once: VV with vertices (v, w), v < w; VEE with edges sorted; E4 and FEE with their four edges sorted.
@@ -139,7 +144,7 @@ def iter_candidates(
     vertex_ids = np.flatnonzero(vmask).astype(np.int64)
     edge_ids = np.flatnonzero(emask).astype(np.int64)
     cells = _cells_per_side(len(edge_ids))
-    geometry = _Geometry(scene, cells)
+    geometry = _Geometry(scene, cells, scene_topology(scene) if topology is None else topology)
     lengths = np.linalg.norm(
         scene.vertices[scene.edges[edge_ids, 1]] - scene.vertices[scene.edges[edge_ids, 0]], axis=1
     )
@@ -324,8 +329,7 @@ class _Geometry:
     plane, unit), bounding spheres, adjacency (core.skeleton.topology), the inward direction of each face
     across each of its edges, the cube-map grid, and the thresholds from scene.tol."""
 
-    def __init__(self, scene: Scene, cells: int):
-        topology = scene_topology(scene)
+    def __init__(self, scene: Scene, cells: int, topology: Topology):
         self.vertices = scene.vertices
         self.edges = scene.edges
         self.points = scene.polygon_points
@@ -2342,6 +2346,7 @@ def _edge_candidates(
                 # the pivot's rows as numbers: views would cost reference counts per pivot
                 h0, h1, h2 = rel[sx, 0], rel[sx, 1], rel[sx, 2]
                 xd0, xd1, xd2 = along[sx, 0], along[sx, 1], along[sx, 2]
+                len_x = np.sqrt(xd0 * xd0 + xd1 * xd1 + xd2 * xd2)
                 # a pivot coplanar with e (a fifth of them in an office) holds its lines to their plane: the
                 # targets lying off it on one side are met by none
                 p0, p1, p2, reach = _plane_reach(ed, h0, h1, h2, xd0, xd1, xd2, scale, tol)
@@ -2428,6 +2433,12 @@ def _edge_candidates(
                             s = roots[r, 0]
                             t = roots[r, 1]
                             if s * len_e < -tol or (s - 1.0) * len_e > tol:
+                                continue
+                            # the two curves also cross off R, where the line misses the pivot (its point
+                            # X(t) off x by more than tol: _meets_segment turns it away, after costlier tests;
+                            # four in five of the roots in their cell at 312 polygons). Twice tol: the root's t
+                            # is not the point _meets_segment finds, up to rounding
+                            if t * len_x < -_PIVOT_SLACK * tol or (t - 1.0) * len_x > _PIVOT_SLACK * tol:
                                 continue
                             if min(max(int(s * nb), 0), nb - 1) != b:
                                 continue

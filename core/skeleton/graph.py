@@ -193,11 +193,21 @@ def assemble_arcs(kind, codes, end, s, direction, node, edge_tol, n_vertices) ->
     order = _ends_first(order, kind, codes, s, edge_tol, n_vertices, direction, node)
     arcs = Arcs(*_pair(order, kind, codes, end, direction, s, node, _count_arcs(order, kind, codes, direction)))
     del order
-    # lines lying in a face's plane at one node lie in it all along the arc (a plane holds the whole swath
-    # or meets it in one line, a node): a node whose end line pokes past that face reports where it ends
-    planar = (arcs.ends == END_PLANAR).any(axis=1)
-    arcs.ends[np.repeat(planar[:, None, :], 2, axis=1)] = END_PLANAR
+    _planar_at_both_nodes(arcs.ends)
     return arcs
+
+
+@njit(cache=True, nogil=True)
+def _planar_at_both_nodes(ends):
+    """Lines lying in a face's plane at one node lie in it all along the arc (a plane holds the whole swath or
+    meets it in one line, a node): a node whose end line pokes past that face reports where it ends. Sets both
+    nodes' end on a side to END_PLANAR where one has it; ends (A, 2, 2) int32 (arc, node, side), in place.
+    (numpy's any over the middle axis of two took 2 ms for office-84's 21 580 arcs.)"""
+    for arc in range(ends.shape[0]):
+        for side in range(2):
+            if ends[arc, 0, side] == END_PLANAR or ends[arc, 1, side] == END_PLANAR:
+                ends[arc, 0, side] = END_PLANAR
+                ends[arc, 1, side] = END_PLANAR
 
 
 #: longest run of one key sorted by insertion (quadratic); longer ones by a merge sort

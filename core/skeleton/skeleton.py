@@ -235,7 +235,7 @@ class Skeleton:
             try:
                 for candidates, fraction in iter_candidates(
                     self.scene, self.vertex_mask, self.edge_mask, sources=None if wanted is None else wanted.tolist(),
-                    cancel=cancel,
+                    cancel=cancel, topology=self.topology,
                 ):  # fmt: skip
                     check_cancel()
                     in_flight.append((pool.submit(validated, candidates), fraction))
@@ -828,6 +828,10 @@ _PROBED_AT_ONCE = 1 << 16
 #: 13-15 ms on one thread, 16 ms with a thread per side)
 _PROBED_ON_ONE_THREAD = 1 << 13
 
+#: fewer arcs than this are indexed by surface pair on one thread (see _pair_index): office-168's 66 701 arcs took
+#: 25 ms on one thread, 29 ms on two; office-312's 193 999 took 75 ms on two, 125 ms on one (2026-11-29)
+_PAIRED_ON_ONE_THREAD = 1 << 17
+
 #: incidences assembled into arcs at a time (see _arcs_by_key_range)
 _ASSEMBLED_AT_ONCE = 1 << 20
 #: fewer incidences than this are assembled on one thread (a thread's start costs more than it saves)
@@ -879,6 +883,10 @@ def _pieces_by_key_range(parts: list, bounds: np.ndarray, n_codes: int, release:
     then held once, in their range; otherwise each range's rows are copied out of the parts, which stay."""
     names = [field.name for field in fields(IncidenceChunk)]
     n_ranges = len(bounds) - 1
+    if n_ranges == 1:
+        # one range holds every row, in the parts' order: nothing to split or select (a copy of each column)
+        yield _concatenated(IncidenceChunk, parts if release else list(parts))
+        return
     if not release:
         for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
             taken = []
@@ -1171,6 +1179,8 @@ def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
     of the arcs, then of the surfaces, are shared among `workers` threads; the result does not depend on how
     many."""
     geometry = (kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group)
+    if kind.shape[0] < _PAIRED_ON_ONE_THREAD:
+        workers = 1
     arc_slices = _even_slices(kind.shape[0], workers)
     counts = _on_threads(lambda lo, hi: _pair_counts(lo, hi, *geometry, n_groups), arc_slices)
     bucket = np.zeros(n_groups + 1, dtype=np.int64)

@@ -641,7 +641,7 @@ def test_depth_map_culls_lose_no_bound(name, cells):
     from core.skeleton import enumeration as E
 
     scene = SCENES[name]()
-    g = E._Geometry(scene, cells)
+    g = E._Geometry(scene, cells, scene_topology(scene))
     n_cells = 3 * cells * cells
     none = np.empty(0, dtype=np.int64)
     culls = (g.widths, g.cell_sine, g.objects[0], g.objects[1], g.objects[2], g.objects[3])
