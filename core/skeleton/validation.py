@@ -992,14 +992,17 @@ def _partner(pair, j):
 
 
 @njit_leaf
-def _relaxed_arc(geometry_ref, line_ref, retained_ref, n_retained, norm_index, norm_dir, sigma, scratch_ref,
-                 incidences_ref, n_inc, node):  # fmt: skip
+def _relaxed_arc(geometry_ref, line_ref, retained_ref, n_retained, norm_index, norm_dir, sigma, both_ways,
+                 scratch_ref, incidences_ref, n_inc, node):  # fmt: skip
     """One arc adjacent to node `node` of `line` (_Line, its frame f1, f2 perpendicular to u) in the scene
     `geometry` (_Geometry), recorded at row n_inc of `incidences` (_Incidences) when it exists; returns the next
     free row. retained = (r_kind, r_id, r_group, r_pin), (3,) arrays: the retained generators, n_retained of them
     in any order; the motion normalised by sliding retained edge `norm_index` by sigma * norm_dir (3-vector);
     r_pin: for a retained edge met at one of its vertices, that vertex (its contact must move into the edge),
-    else -1. scratch: the work arrays (_Scratch; x below: its solution, the motion's coefficients).
+    else -1. both_ways: the arc of the opposite motion (-sigma) too, recorded after it: sigma scales the right-hand
+    side of the motion's linear system alone, so that motion is the solution negated, and everything before it
+    (the pencil and pivot tests, the system and its solve) is done once for both. scratch: the work arrays
+    (_Scratch; x below: its solution, the motion's coefficients).
 
     The named tuples are handed over by address (`*_ref`, core.jit.by_reference): numba passes a tuple member by
     member, and the 408 machine words of these five were copied on the stack at every call; by address, with
@@ -1013,7 +1016,6 @@ def _relaxed_arc(geometry_ref, line_ref, retained_ref, n_retained, norm_index, n
     line = dereferenced(line_ref)
     retained = dereferenced(retained_ref)
     scratch = dereferenced(scratch_ref)
-    incidences = dereferenced(incidences_ref)
     (points, offsets, normals, areas, vertices, edges, edge_unit, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
      corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
      angle_tol) = geometry
@@ -1113,6 +1115,34 @@ def _relaxed_arc(geometry_ref, line_ref, retained_ref, n_retained, norm_index, n
                     x[base] -= out * m1
                     x[base + 1] -= out * m2
             break
+    n_inc = _arc_of_motion(geometry_ref, line_ref, retained_ref, n_retained, norm_index, norm_partner, pencil, pair,
+                           pivot, scratch_ref, incidences_ref, n_inc, node)  # fmt: skip
+    if both_ways:
+        for k in range(4):
+            x[k] = -x[k]
+        n_inc = _arc_of_motion(geometry_ref, line_ref, retained_ref, n_retained, norm_index, norm_partner, pencil,
+                               pair, pivot, scratch_ref, incidences_ref, n_inc, node)  # fmt: skip
+    return n_inc
+
+
+@njit_leaf
+def _arc_of_motion(geometry_ref, line_ref, retained_ref, n_retained, norm_index, norm_partner, pencil, pair, pivot,
+                   scratch_ref, incidences_ref, n_inc, node):  # fmt: skip
+    """The arc of _relaxed_arc for the motion solved in scratch.solution (x: alpha = x[0] f1 + x[1] f2, beta =
+    x[2] f1 + x[3] f2), recorded at row n_inc of `incidences` when it exists; returns the next free row.
+    norm_index, norm_partner, pencil, pair, pivot: as _relaxed_arc found them (-1: none)."""
+    geometry = dereferenced(geometry_ref)
+    line = dereferenced(line_ref)
+    retained = dereferenced(retained_ref)
+    scratch = dereferenced(scratch_ref)
+    incidences = dereferenced(incidences_ref)
+    (points, offsets, normals, areas, vertices, edges, edge_unit, vf_off, vf_face, vf_corner, ef_off, ef_face, ef_local,
+     corner_edge, face_group, object_ids, element_solid, face_region, split_edge, diag, tol,
+     angle_tol) = geometry
+    c_poly, c_kind, c_local, g_lo, g_hi, g_tau, n_groups, sl_poly, sl_a, sl_b, n_sliding, start, u, f1, f2 = line
+    r_kind, r_id, r_group, r_pin = retained
+    (polys, kinds, locals_, arc_start, arc_len, bounds, in_plane, system, rhs, x, order, codes, touch, touch_face,
+     planar, behind, angles) = scratch
     beta = _combined(x[2], f1, x[3], f2)
     beta_len = np.sqrt(_dot(beta, beta))
     tilted = u
@@ -1647,9 +1677,8 @@ def _arcs_off_edge(geometry_ref, line_ref, retained_ref, scratch_ref, incidences
             r_kind[0], r_id[0], r_group[0] = GEN_VERTEX, v, group_v
             r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
             norm_dir = _edge_direction(g_.edge_unit, edges, e, -1)
-            for sigma in (1.0, -1.0):
-                n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 2, 1, norm_dir, sigma, scratch_ref,
-                                     incidences_ref, n_inc, node)  # fmt: skip
+            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 2, 1, norm_dir, 1.0, True, scratch_ref,
+                                 incidences_ref, n_inc, node)  # fmt: skip
     return n_inc
 
 
@@ -1695,8 +1724,8 @@ def _pencils_at_junction(geometry_ref, line_ref, retained_ref, scratch_ref, inci
             r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
             r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
             r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, group_v
-            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 1, into, 1.0, scratch_ref, incidences_ref,
-                                 n_inc, node)  # fmt: skip
+            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 1, into, 1.0, False, scratch_ref,
+                                 incidences_ref, n_inc, node)  # fmt: skip
             r_pin[1] = -1
     return n_inc
 
@@ -1723,7 +1752,7 @@ def _swaths_leaving_both_vertices(geometry_ref, line_ref, retained_ref, scratch_
             r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_pin, gg[1], gid[1]
             r_kind[2], r_id[2], r_group[2] = GEN_EDGE, extra, g
             norm_dir = _edge_direction(geometry.edge_unit, geometry.edges, e_slide, gid[0])
-            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 0, norm_dir, 1.0, scratch_ref,
+            n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 0, norm_dir, 1.0, False, scratch_ref,
                                  incidences_ref, n_inc, node)  # fmt: skip
             r_pin[1] = -1
     return n_inc
@@ -1790,11 +1819,10 @@ def _swaths_leaving_three_corners(geometry_ref, line_ref, retained_ref, scratch_
                 r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_b, groups[1], pins[1, b]
                 r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_c, groups[2], pins[2, c]
                 norm_dir = _edge_direction(geometry.edge_unit, geometry.edges, e_a, -1)
-                for sigma in (1.0, -1.0):
-                    n_inc = _relaxed_arc(
-                        geometry_ref, line_ref, retained_ref, 3, 0, norm_dir, sigma, scratch_ref, incidences_ref,
-                        n_inc, node
-                    )
+                n_inc = _relaxed_arc(
+                    geometry_ref, line_ref, retained_ref, 3, 0, norm_dir, 1.0, True, scratch_ref, incidences_ref,
+                    n_inc, node
+                )
     for k in range(3):
         r_pin[k] = -1
     return n_inc
@@ -1814,9 +1842,8 @@ def _vertex_replaced_by_edge(geometry_ref, line_ref, retained_ref, scratch_ref, 
         r_id[k] = extra if k == j else gid[k]
         r_group[k] = gg[k]
     norm_dir = _edge_direction(geometry.edge_unit, geometry.edges, extra, -1)
-    for sigma in (1.0, -1.0):
-        n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, ng, j, norm_dir, sigma, scratch_ref,
-                             incidences_ref, n_inc, node)  # fmt: skip
+    n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, ng, j, norm_dir, 1.0, True, scratch_ref,
+                         incidences_ref, n_inc, node)  # fmt: skip
     return _pencils_at_junction(
         geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, edge_mask, ve_off, ve_edge,
         gid[j], gg[j], extra,
@@ -1909,7 +1936,7 @@ def _pencils_at_shared_corner(geometry_ref, corner_vertex, line_ref, retained_re
                     r_kind[0], r_id[0], r_group[0] = GEN_EDGE, gid[k], gg[k]
                     r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
                     r_kind[2], r_id[2], r_group[2], r_pin[2] = GEN_EDGE, e_w, group_v, w
-                    n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 1, into_v, 1.0, scratch_ref,
+                    n_inc = _relaxed_arc(geometry_ref, line_ref, retained_ref, 3, 1, into_v, 1.0, False, scratch_ref,
                                          incidences_ref, n_inc, node)  # fmt: skip
                     r_pin[1] = -1
                     r_pin[2] = -1
@@ -2015,8 +2042,8 @@ def _pencils_to_vertex_on_edge(geometry_ref, line_ref, retained_ref, scratch_ref
                         r_kind[1], r_id[1], r_group[1], r_pin[1] = GEN_EDGE, e_v, group_v, v
                         r_kind[2], r_id[2], r_group[2] = GEN_EDGE, e, g
                         n_inc = _relaxed_arc(
-                            geometry_ref, line_ref, retained_ref, 3, 1, into, 1.0, scratch_ref, incidences_ref, n_inc,
-                            node
+                            geometry_ref, line_ref, retained_ref, 3, 1, into, 1.0, False, scratch_ref, incidences_ref,
+                            n_inc, node
                         )
                         r_pin[1] = -1
     return n_inc
@@ -2063,11 +2090,10 @@ def _pencils_over_plane_edges(geometry_ref, line_ref, retained_ref, scratch_ref,
                 r_kind[1], r_id[1], r_group[1] = GEN_EDGE, e, g
                 r_kind[2], r_id[2], r_group[2] = GEN_EDGE, gid[sliding], gg[sliding]
                 norm_dir = _edge_direction(edge_unit, edges, gid[sliding], -1)
-                for sigma in (1.0, -1.0):
-                    n_inc = _relaxed_arc(
-                        geometry_ref, line_ref, retained_ref, 3, 2, norm_dir, sigma, scratch_ref, incidences_ref,
-                        n_inc, node
-                    )
+                n_inc = _relaxed_arc(
+                    geometry_ref, line_ref, retained_ref, 3, 2, norm_dir, 1.0, True, scratch_ref, incidences_ref,
+                    n_inc, node
+                )
     return n_inc
 
 
@@ -2811,11 +2837,10 @@ def _validate_from(
                             n_retained += 1
                         norm_dir = _edge_direction(edge_unit, edges, r_id[norm], -1)
                         first_row = n_inc
-                        for sigma in (1.0, -1.0):
-                            n_inc = _relaxed_arc(
-                                geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, sigma, scratch_ref,
-                                incidences_ref, n_inc, node,
-                            )  # fmt: skip
+                        n_inc = _relaxed_arc(
+                            geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, 1.0, True, scratch_ref,
+                            incidences_ref, n_inc, node,
+                        )  # fmt: skip
                         # the lines ending on a face at an edge lying on it, going on past this line both ways alike:
                         # the arc passes it (a node inside the arc, see Skeleton._arc_cuts); it ends the arc only where
                         # one way is no arc (lines going on between touching objects). So does a dropped flat polygon's
@@ -2877,21 +2902,19 @@ def _validate_from(
                 r_id[k] = gid[k]
                 r_group[k] = gg[k]
             norm_dir = _edge_direction(edge_unit, edges, gid[lone], -1)
-            for sigma in (1.0, -1.0):
-                n_inc = _relaxed_arc(
-                    geometry_ref, line_ref, retained_ref, 3, lone, norm_dir, sigma, scratch_ref, incidences_ref,
-                    n_inc, node
-                )
+            n_inc = _relaxed_arc(
+                geometry_ref, line_ref, retained_ref, 3, lone, norm_dir, 1.0, True, scratch_ref, incidences_ref,
+                n_inc, node
+            )
             # and the pencil of the plane about the third edge's point, its contacts sliding off the crossing
             pair_low = 1 if lone == 0 else 0
             if gid[3 - lone - pair_low] < gid[pair_low]:
                 pair_low = 3 - lone - pair_low
             norm_dir = _edge_direction(edge_unit, edges, gid[pair_low], -1)
-            for sigma in (1.0, -1.0):
-                n_inc = _relaxed_arc(
-                    geometry_ref, line_ref, retained_ref, 3, pair_low, norm_dir, sigma, scratch_ref, incidences_ref,
-                    n_inc, node
-                )
+            n_inc = _relaxed_arc(
+                geometry_ref, line_ref, retained_ref, 3, pair_low, norm_dir, 1.0, True, scratch_ref, incidences_ref,
+                n_inc, node
+            )
             n_inc = _pencils_over_plane_edges(
                 geometry_ref, line_ref, retained_ref, scratch_ref, incidences_ref, n_inc, node, gid, gg, lone
             )
@@ -2915,11 +2938,10 @@ def _validate_from(
                 if norm < 0:
                     continue
                 norm_dir = _edge_direction(edge_unit, edges, r_id[norm], -1)
-                for sigma in (1.0, -1.0):
-                    n_inc = _relaxed_arc(
-                        geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, sigma, scratch_ref,
-                        incidences_ref, n_inc, node
-                    )
+                n_inc = _relaxed_arc(
+                    geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, 1.0, True, scratch_ref,
+                    incidences_ref, n_inc, node
+                )
             else:
                 v = gid[j]
                 for slot in range(ve_off[v], ve_off[v + 1]):
@@ -2943,7 +2965,7 @@ def _validate_from(
                         n_retained += 1
                     norm_dir = _edge_direction(edge_unit, edges, e, v)
                     n_inc = _relaxed_arc(
-                        geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, 1.0, scratch_ref,
+                        geometry_ref, line_ref, retained_ref, n_retained, norm, norm_dir, 1.0, False, scratch_ref,
                         incidences_ref, n_inc, node
                     )
         # at a flat polygon's corner, the arcs whose lines all lie in its plane slide over the polygon: it is no
