@@ -2240,6 +2240,13 @@ def _edge_candidates(
     chosen_edge = np.empty(n_edges, dtype=np.int64)
     chosen_ends = np.empty((n_edges, 2), dtype=np.int64)
     chosen_slot = np.empty(n_edges, dtype=np.int64)
+    # the same of a group's members (a target registers in a key at most once per side), gathered once per group
+    # for the loops over its pivots and their partners
+    member_bits = np.empty(2 * n_edges, dtype=np.uint64)
+    member_side = np.empty(2 * n_edges, dtype=np.int8)
+    member_edge = np.empty(2 * n_edges, dtype=np.int64)
+    member_ends = np.empty((2 * n_edges, 2), dtype=np.int64)
+    member_slot = np.empty(2 * n_edges, dtype=np.int64)
     across = np.empty(n_edges, dtype=np.int64)
     moebius = np.empty((n_edges, 7))
     gen = np.empty(3, dtype=np.int64)
@@ -2317,7 +2324,16 @@ def _edge_candidates(
             s_hi = (b + 1) / nb + eps
             later_behind = 0
             for xi in range(g0, g1):
-                later_behind += sides[order[xi]]
+                r = order[xi]
+                m = xi - g0
+                member_bits[m] = bits[r]
+                member_side[m] = sides[r]
+                member_slot[m] = tgts[r]
+                f = ids[tgts[r]]
+                member_edge[m] = f
+                member_ends[m, 0] = edges[f, 0]
+                member_ends[m, 1] = edges[f, 1]
+                later_behind += member_side[m]
             for xi in range(g0, g1 - 2):
                 rx = order[xi]
                 later_behind -= sides[rx]
@@ -2361,26 +2377,33 @@ def _edge_candidates(
                 n_chosen = 0
                 behind_after = later_behind
                 chosen_across = False
+                x_bits = member_bits[xi - g0]
+                x_side = member_side[xi - g0]
+                x0 = member_ends[xi - g0, 0]
+                x1 = member_ends[xi - g0, 1]
                 for yi in range(xi + 1, g1):
-                    ry = order[yi]
-                    behind_after -= sides[ry]
+                    my = yi - g0
+                    y_side = member_side[my]
+                    behind_after -= y_side
                     # a y beside x pairs with a z across: with none chosen and none left, nothing is
                     if (
-                        sides[ry] == sides[rx]
+                        y_side == x_side
                         and not chosen_across
-                        and (behind_after if sides[rx] == 0 else g1 - yi - 1 - behind_after) == 0
+                        and (behind_after if x_side == 0 else g1 - yi - 1 - behind_after) == 0
                     ):
                         break
-                    if bits[rx] & bits[ry] == 0:
+                    if x_bits & member_bits[my] == 0:
                         continue
-                    sy = tgts[ry]
-                    fy = ids[sy]
-                    if fy == fx or _share_vertex(edges, fx, fy):
+                    fy = member_edge[my]
+                    y0 = member_ends[my, 0]
+                    y1 = member_ends[my, 1]
+                    if fy == fx or x0 == y0 or x0 == y1 or x1 == y0 or x1 == y1:
                         continue
                     # beside x on its side, y would be with x the two generators of the side holding two, both
                     # below e (ids increase along the group): no line of such a pair is kept (see below)
-                    if sides[ry] == sides[rx] and fy < e:
+                    if y_side == x_side and fy < e:
                         continue
+                    sy = member_slot[my]
                     if bounded:
                         height = p0 * rel[sy, 0] + p1 * rel[sy, 1] + p2 * rel[sy, 2]
                         rise = p0 * along[sy, 0] + p1 * along[sy, 1] + p2 * along[sy, 2]
@@ -2396,14 +2419,14 @@ def _edge_candidates(
                     slack = eps * (abs(c0) + abs(c1) + abs(c2) + abs(c3))
                     if not _curve_meets(c0, c1, c2, c3, region, k_count, slack):
                         continue
-                    chosen[n_chosen] = ry
-                    chosen_bits[n_chosen] = bits[ry]
-                    chosen_side[n_chosen] = sides[ry]
+                    chosen[n_chosen] = order[yi]
+                    chosen_bits[n_chosen] = member_bits[my]
+                    chosen_side[n_chosen] = y_side
                     chosen_edge[n_chosen] = fy
-                    chosen_ends[n_chosen, 0] = edges[fy, 0]
-                    chosen_ends[n_chosen, 1] = edges[fy, 1]
+                    chosen_ends[n_chosen, 0] = y0
+                    chosen_ends[n_chosen, 1] = y1
                     chosen_slot[n_chosen] = sy
-                    chosen_across = chosen_across or sides[ry] != sides[rx]
+                    chosen_across = chosen_across or y_side != x_side
                     moebius[n_chosen, 6] = 0.0
                     coef[n_chosen, 0] = c0
                     coef[n_chosen, 1] = c1
