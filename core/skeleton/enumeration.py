@@ -2434,10 +2434,9 @@ def _edge_candidates(
                     coef[n_chosen, 3] = c3
                     n_chosen += 1
                 # an E4 line has generators on both sides of e: beside a y on x's side, z comes from across
-                side_x = sides[rx]
                 n_across = 0
                 for ya in range(n_chosen):
-                    if chosen_side[ya] != side_x:
+                    if chosen_side[ya] != x_side:
                         across[n_across] = ya
                         n_across += 1
                 passed = 0
@@ -2446,11 +2445,11 @@ def _edge_candidates(
                     fy = chosen_edge[ya]
                     y0 = chosen_ends[ya, 0]
                     y1 = chosen_ends[ya, 1]
-                    side_y = chosen_side[ya]
-                    bits_xy = bits[rx] & chosen_bits[ya]
+                    y_side = chosen_side[ya]
+                    bits_xy = x_bits & chosen_bits[ya]
                     while passed < n_across and across[passed] <= ya:
                         passed += 1
-                    beside = side_y == side_x
+                    beside = y_side == x_side
                     for k in range(n_across - passed if beside else n_chosen - ya - 1):
                         za = across[passed + k] if beside else ya + 1 + k
                         if bits_xy & chosen_bits[za] == 0:
@@ -2460,13 +2459,13 @@ def _edge_candidates(
                         z1 = chosen_ends[za, 1]
                         if fz == fy or y0 == z0 or y0 == z1 or y1 == z0 or y1 == z1:
                             continue
-                        side_z = chosen_side[za]
-                        behind = side_x + side_y + side_z
+                        z_side = chosen_side[za]
+                        behind = x_side + y_side + z_side
                         # the line is kept from its inner edge of lowest id (below), and the other inner edge
                         # is one of the two generators on the side holding two: both below e, it is not kept
                         two_side = 0 if behind == 1 else 1
-                        if max(fx if side_x == two_side else -1, fy if side_y == two_side else -1,
-                               fz if side_z == two_side else -1) < e:  # fmt: skip
+                        if max(fx if x_side == two_side else -1, fy if y_side == two_side else -1,
+                               fz if z_side == two_side else -1) < e:  # fmt: skip
                             continue
                         rz = chosen[za]
                         ry_slot = chosen_slot[ya]
