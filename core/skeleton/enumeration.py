@@ -2397,7 +2397,7 @@ def _edge_candidates(
                     fy = member_edge[my]
                     y0 = member_ends[my, 0]
                     y1 = member_ends[my, 1]
-                    if fy == fx or x0 == y0 or x0 == y1 or x1 == y0 or x1 == y1:
+                    if fy == fx or _ends_shared(x0, x1, y0, y1):
                         continue
                     # beside x on its side, y would be with x the two generators of the side holding two, both
                     # below e (ids increase along the group): no line of such a pair is kept (see below)
@@ -2457,7 +2457,7 @@ def _edge_candidates(
                         fz = chosen_edge[za]
                         z0 = chosen_ends[za, 0]
                         z1 = chosen_ends[za, 1]
-                        if fz == fy or y0 == z0 or y0 == z1 or y1 == z0 or y1 == z1:
+                        if fz == fy or _ends_shared(y0, y1, z0, z1):
                             continue
                         z_side = chosen_side[za]
                         behind = x_side + y_side + z_side
@@ -2883,8 +2883,13 @@ def _towards_piercing(vertices, edges, g, normal, offset, through, n, tol, d):
 
 @njit_leaf
 def _share_vertex(edges, f, g):
-    return edges[f, 0] == edges[g, 0] or edges[f, 0] == edges[g, 1] or edges[f, 1] == edges[g, 0] or \
-        edges[f, 1] == edges[g, 1]  # fmt: skip
+    return _ends_shared(edges[f, 0], edges[f, 1], edges[g, 0], edges[g, 1])
+
+
+@njit_leaf
+def _ends_shared(a0, a1, b0, b1):
+    """Whether an edge of end vertices a0, a1 and one of ends b0, b1 share a vertex."""
+    return a0 == b0 or a0 == b1 or a1 == b0 or a1 == b1
 
 
 # ----------------------------------------------------------------------------------------------------------
