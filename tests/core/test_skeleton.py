@@ -1127,6 +1127,31 @@ def test_arcs_assembled_by_key_range_are_those_assembled_at_once(name, monkeypat
     np.testing.assert_array_equal(pieces._pair_arcs, whole._pair_arcs)
 
 
+def test_incidences_held_in_narrow_integers_give_the_arcs_of_int32_ones(monkeypatch):
+    """The incidences a build holds keep their codes and end groups in int16 when the scene's codes and face
+    groups fit (and int32 past 32 767): the arcs and the pair index are those of incidences held in int32, for a
+    complete build and for a partial one, whose held incidences stay narrow."""
+    from core.skeleton.skeleton import _narrowest_int
+
+    assert _narrowest_int(32767) == np.int16 and _narrowest_int(32768) == np.int32
+    name = "furnished room 0"
+    scene = _scene(name)
+    narrow = build_skeleton(scene)
+    narrow_partial = build_skeleton(scene, sources=[0])
+    held = narrow_partial._incidence_parts[0]
+    assert len(held) > 0 and held.codes.dtype == np.int16 and held.end.dtype == np.int16
+    monkeypatch.setattr(skeleton_module, "_narrowest_int", lambda limit: np.int32)
+    wide = build_skeleton(scene)
+    wide_partial = build_skeleton(scene, sources=[0])
+    assert wide_partial._incidence_parts[0].codes.dtype == np.int32
+    for built, expected in ((narrow, wide), (narrow_partial, wide_partial)):
+        for field in ("kind", "codes", "node", "s", "ends"):
+            got, want = getattr(built.arcs, field), getattr(expected.arcs, field)
+            assert got.dtype == want.dtype, field
+            np.testing.assert_array_equal(got, want, err_msg=field)
+        np.testing.assert_array_equal(built._pair_arcs, expected._pair_arcs)
+
+
 @pytest.mark.parametrize("name", ["furnished room 0", "lamp table"])
 def test_nodes_merged_within_each_chunk_give_the_skeleton_merged_at_the_end(name, monkeypatch):
     """Merging a chunk's nodes on one line (and their repeated incidences) as it is validated, to keep the
