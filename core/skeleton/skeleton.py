@@ -311,15 +311,7 @@ class Skeleton:
     def _index(self) -> None:
         scene, topo, arcs = self.scene, self.topology, self.arcs
         n_vertices = scene.n_vertices
-        ev = np.flatnonzero(arcs.kind == ARC_EV)
-        ev_vertex = arcs.codes[ev, 0]
-        order = np.argsort(ev_vertex, kind="stable")
-        self._vertex_arcs = ev[order].astype(np.int32)
-        self._vertex_offsets = np.zeros(n_vertices + 1, dtype=np.int64)
-        self._vertex_offsets[1:] = np.cumsum(np.bincount(ev_vertex, minlength=n_vertices))
-        # the pair index is the largest array of a build: what this step leaves goes before it
-        del ev, ev_vertex, order
-        _return_free_memory()
+        self._vertex_arcs, self._vertex_offsets = _vertex_index(arcs.kind, arcs.codes, n_vertices)
         self._pair_first, self._pair_second, self._pair_offsets, self._pair_arcs = _pair_index(
             arcs.kind, arcs.codes, arcs.ends, n_vertices, topo.vertex_face_offsets, topo.vertex_faces,
             scene.edge_face_offsets, scene.edge_faces, topo.face_group, topo.n_groups, WORKERS,
@@ -1219,6 +1211,27 @@ def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
     return first, second, offsets, arcs
 
 
+@njit(cache=True)
+def _vertex_index(kind, codes, n_vertices):
+    """The EV arcs of each vertex, CSR: arcs (E,) int32 in increasing order within each vertex, offsets (V + 1,)
+    int64; an EV arc's vertex is its first code. A counting sort: an argsort of the EV arcs' vertices would hold
+    int64 arrays of every EV arc beside the result, at the build's peak."""
+    offsets = np.zeros(n_vertices + 1, dtype=np.int64)
+    for arc in range(kind.shape[0]):
+        if kind[arc] == ARC_EV:
+            offsets[codes[arc, 0] + 1] += 1
+    for vertex in range(n_vertices):
+        offsets[vertex + 1] += offsets[vertex]
+    fill = offsets[:-1].copy()
+    arcs = np.empty(offsets[n_vertices], dtype=np.int32)
+    for arc in range(kind.shape[0]):
+        if kind[arc] == ARC_EV:
+            vertex = codes[arc, 0]
+            arcs[fill[vertex]] = arc
+            fill[vertex] += 1
+    return arcs, offsets
+
+
 @njit(cache=True, nogil=True)
 def _pair_counts(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face, face_group, n_groups):
     """(G,) int64: how many (pair, arc) rows the arcs lo..hi-1 give each first surface."""
@@ -1259,7 +1272,6 @@ def _sort_pairs(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, 
     for group in range(lo, hi):
         longest = max(longest, bucket[group + 1] - bucket[group])
     row_second = np.empty(longest, dtype=np.int32)
-    moved_second = np.empty(longest, dtype=np.int32)
     moved_arcs = np.empty(longest, dtype=np.int32)
     pair_first = np.empty(16, dtype=np.int32)
     pair_second = np.empty(16, dtype=np.int32)
@@ -1285,30 +1297,27 @@ def _sort_pairs(lo, hi, kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, 
                 n_seen += 1
             row_of[second] += 1
         seen[:n_seen].sort()
-        # each second surface's first row among the group's
-        start = 0
-        for k in range(n_seen):
-            rows = row_of[seen[k]]
-            row_of[seen[k]] = start
-            start += rows
-        for row in range(first_row, end_row):
-            second = row_second[row - first_row]
-            target = row_of[second]
-            moved_second[target] = second
-            moved_arcs[target] = arcs[row]
-            row_of[second] = target + 1
-        arcs[first_row:end_row] = moved_arcs[: end_row - first_row]
         if n_pairs + n_seen > pair_first.shape[0]:
             size = max(2 * pair_first.shape[0], n_pairs + n_seen)
             pair_first = _resized(pair_first, size)
             pair_second = _resized(pair_second, size)
             pair_row = _resized(pair_row, size)
-        for row in range(end_row - first_row):
-            if row == 0 or moved_second[row] != moved_second[row - 1]:
-                pair_first[n_pairs] = group
-                pair_second[n_pairs] = moved_second[row]
-                pair_row[n_pairs] = first_row + row
-                n_pairs += 1
+        # each second surface's first row among the group's: one pair each
+        start = 0
+        for k in range(n_seen):
+            rows = row_of[seen[k]]
+            row_of[seen[k]] = start
+            pair_first[n_pairs] = group
+            pair_second[n_pairs] = seen[k]
+            pair_row[n_pairs] = first_row + start
+            n_pairs += 1
+            start += rows
+        for row in range(first_row, end_row):
+            second = row_second[row - first_row]
+            target = row_of[second]
+            moved_arcs[target] = arcs[row]
+            row_of[second] = target + 1
+        arcs[first_row:end_row] = moved_arcs[: end_row - first_row]
         for k in range(n_seen):
             row_of[seen[k]] = 0
     return pair_first[:n_pairs].copy(), pair_second[:n_pairs].copy(), pair_row[:n_pairs].copy()

@@ -1153,6 +1153,21 @@ def test_incidences_held_in_narrow_integers_give_the_arcs_of_int32_ones(monkeypa
 
 
 @pytest.mark.parametrize("name", ["furnished room 0", "lamp table"])
+def test_vertex_index_lists_each_vertex_ev_arcs_in_increasing_order(name):
+    """The vertex index (the EV arcs of each vertex, which its views start from) holds, for every vertex, the EV
+    arcs whose vertex it is, in increasing order, each once: against a scan of all arcs per vertex."""
+    scene = _scene(name)
+    skeleton = build_skeleton(scene)
+    arcs, offsets = skeleton._vertex_arcs, skeleton._vertex_offsets
+    assert offsets.shape == (scene.n_vertices + 1,) and offsets[0] == 0 and offsets[-1] == len(arcs)
+    ev = skeleton.arcs.kind == ARC_EV
+    assert np.count_nonzero(ev) > 0
+    for vertex in range(scene.n_vertices):
+        expected = np.flatnonzero(ev & (skeleton.arcs.codes[:, 0] == vertex))
+        np.testing.assert_array_equal(arcs[offsets[vertex] : offsets[vertex + 1]], expected, err_msg=str(vertex))
+
+
+@pytest.mark.parametrize("name", ["furnished room 0", "lamp table"])
 def test_nodes_merged_within_each_chunk_give_the_skeleton_merged_at_the_end(name, monkeypatch):
     """Merging a chunk's nodes on one line (and their repeated incidences) as it is validated, to keep the
     build's memory down (every chunk but a complete build's last, which the end merges anyway), gives the nodes
