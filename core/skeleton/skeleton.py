@@ -1215,7 +1215,7 @@ def _pair_index(kind, codes, ends, n_vertices, vf_off, vf_face, ef_off, ef_face,
 def _vertex_index(kind, codes, n_vertices):
     """The EV arcs of each vertex, CSR: arcs (E,) int32 in increasing order within each vertex, offsets (V + 1,)
     int64; an EV arc's vertex is its first code. A counting sort: an argsort of the EV arcs' vertices would hold
-    int64 arrays of every EV arc beside the result, at the build's peak."""
+    int64 arrays of every EV arc beside the result (~70 MB at office-1488)."""
     offsets = np.zeros(n_vertices + 1, dtype=np.int64)
     for arc in range(kind.shape[0]):
         if kind[arc] == ARC_EV:
