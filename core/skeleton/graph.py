@@ -26,8 +26,9 @@ class Arcs:
     """A arcs. kind (A,) int8 ARC_*; codes (A, 3) int32 generators in canonical line order (vertex v -> v,
     edge e -> V + e, -1 padded); node (A, 2) int32 the start and end node (-1: dangling); s (A, 2) float64
     their coordinates on the arc's parameter edge (its lowest edge generator), start < end; ends (A, 2, 2)
-    int32 the face groups beyond the first / last generator (END_*) as found at the start node and at the end
-    node (they differ where the lines end exactly on a blocker's edge)."""
+    int32 (a Skeleton holds them in the narrowest integer its face groups fit) the face groups beyond the first
+    / last generator (END_*) as found at the start node and at the end node (they differ where the lines end
+    exactly on a blocker's edge)."""
 
     kind: np.ndarray
     codes: np.ndarray

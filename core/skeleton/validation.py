@@ -3188,9 +3188,10 @@ def _validate_slice(scene, topology, bvh, candidates, edge_mask, element_solid, 
 class NodeChunk:
     """N validated nodes. kind (N,) int8 NODE_*; gen_kind (N, 4) int8 GEN_* and gen_id (N, 4) int32, the
     generators in line order (GEN_NONE / -1 padded); start (N, 3), direction (N, 3) unit: the line is
-    start + tau direction; end (N, 2) int32 the face groups met beyond the first and the last generator
-    (END_TERMINAL when the line stops on it, END_FREE when it leaves); reach (N, 2) float64 the tau of those
-    points, seed 003's P_down and P_up (the outer generator's own when terminal, -inf / +inf when free)."""
+    start + tau direction; end (N, 2) int32 (a Skeleton holds it in the narrowest integer its face groups fit)
+    the face groups met beyond the first and the last generator (END_TERMINAL when the line stops on it,
+    END_FREE when it leaves); reach (N, 2) float64 the tau of those points, seed 003's P_down and P_up (the
+    outer generator's own when terminal, -inf / +inf when free)."""
 
     kind: np.ndarray
     gen_kind: np.ndarray

@@ -1129,8 +1129,9 @@ def test_arcs_assembled_by_key_range_are_those_assembled_at_once(name, monkeypat
 
 def test_incidences_held_in_narrow_integers_give_the_arcs_of_int32_ones(monkeypatch):
     """The incidences a build holds keep their codes and end groups in int16 when the scene's codes and face
-    groups fit (and int32 past 32 767): the arcs and the pair index are those of incidences held in int32, for a
-    complete build and for a partial one, whose held incidences stay narrow."""
+    groups fit (and int32 past 32 767), and so do its nodes' and arcs' end groups: the nodes, arcs and the pair
+    index are those of incidences held in int32, for a complete build and for a partial one, whose held
+    incidences stay narrow."""
     from core.skeleton.skeleton import _narrowest_int
 
     assert _narrowest_int(32767) == np.int16 and _narrowest_int(32768) == np.int32
@@ -1145,10 +1146,13 @@ def test_incidences_held_in_narrow_integers_give_the_arcs_of_int32_ones(monkeypa
     wide_partial = build_skeleton(scene, sources=[0])
     assert wide_partial._incidence_parts[0].codes.dtype == np.int32
     for built, expected in ((narrow, wide), (narrow_partial, wide_partial)):
+        assert built.arcs.ends.dtype == built.nodes.end.dtype == np.int16
+        assert expected.arcs.ends.dtype == expected.nodes.end.dtype == np.int32
         for field in ("kind", "codes", "node", "s", "ends"):
             got, want = getattr(built.arcs, field), getattr(expected.arcs, field)
-            assert got.dtype == want.dtype, field
+            assert field == "ends" or got.dtype == want.dtype, field
             np.testing.assert_array_equal(got, want, err_msg=field)
+        np.testing.assert_array_equal(built.nodes.end, expected.nodes.end)
         np.testing.assert_array_equal(built._pair_arcs, expected._pair_arcs)
 
 
