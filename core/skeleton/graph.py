@@ -26,9 +26,9 @@ class Arcs:
     """A arcs. kind (A,) int8 ARC_*; codes (A, 3) int32 generators in canonical line order (vertex v -> v,
     edge e -> V + e, -1 padded); node (A, 2) int32 the start and end node (-1: dangling); s (A, 2) float64
     their coordinates on the arc's parameter edge (its lowest edge generator), start < end; ends (A, 2, 2)
-    int32 (a Skeleton holds them in the narrowest integer its face groups fit) the face groups beyond the first
-    / last generator (END_*) as found at the start node and at the end node (they differ where the lines end
-    exactly on a blocker's edge)."""
+    (the incidences' integer type: a Skeleton's narrowest that fits its face groups) the face groups beyond the
+    first / last generator (END_*) as found at the start node and at the end node (they differ where the lines
+    end exactly on a blocker's edge)."""
 
     kind: np.ndarray
     codes: np.ndarray
@@ -187,7 +187,7 @@ def assemble_arcs(kind, codes, end, s, direction, node, edge_tol, n_vertices) ->
     if len(kind) == 0:
         return Arcs(
             np.empty(0, np.int8), np.empty((0, 3), np.int32), np.empty((0, 2), np.int32), np.empty((0, 2)),
-            np.empty((0, 2, 2), np.int32),
+            np.empty((0, 2, 2), end.dtype),
         )  # fmt: skip
     # the kernels read the incidences through `order`: gathered copies of them set the peak memory of a build
     order = _by_key_then_s(kind, codes, s)
@@ -342,7 +342,7 @@ def _pair(order, kind, codes, end, direction, s, node, n_arcs):
     out_codes = np.empty((n_arcs, 3), dtype=np.int32)
     out_node = np.full((n_arcs, 2), -1, dtype=np.int32)
     out_s = np.full((n_arcs, 2), np.nan)
-    out_ends = np.empty((n_arcs, 2, 2), dtype=np.int32)
+    out_ends = np.empty((n_arcs, 2, 2), dtype=end.dtype)
     count = 0
     pending = -1
     for i in range(len(order) + 1):
